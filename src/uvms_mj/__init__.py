@@ -1,0 +1,31 @@
+"""uvms-mj: a MuJoCo testbed for underwater vehicle-manipulator systems.
+
+Reproduces Sagara et al., "Digital type disturbance compensation control of a floating
+underwater robot with 2 link manipulator": a floating base with 3 thrusters carrying a planar
+2-link arm, with exact added mass, strip-theory drag and buoyancy.
+
+    >>> from uvms_mj import Plant
+    >>> plant = Plant()          # default robot, all hydrodynamics on
+    >>> plant.step(600)          # 1 s at the default 1/600 s step
+"""
+
+from .kinematics import ArmGeometry
+from .hydro import HydroModel, HydroTerms, strip_integrals
+from .params import ParameterError, RobotParams, read_params
+from .plant import DivergenceError, Energy, Plant, default_model_path, models_dir
+
+__all__ = [
+    "ArmGeometry",
+    "DivergenceError",
+    "Energy",
+    "HydroModel",
+    "HydroTerms",
+    "ParameterError",
+    "Plant",
+    "RobotParams",
+    "default_model_path",
+    "models_dir",
+    "read_params",
+    "strip_integrals",
+]
+__version__ = "0.1.0"
