@@ -1,0 +1,154 @@
+"""The sampled loop: plant at its own dt, controller every T with a zero-order hold.
+
+Measurements are sampled at kT: base pose and joint angles, with optional Gaussian noise,
+quantization and a one-sample delay (:class:`SensorModel`); velocities come from a velocity
+sensor if configured, else the controller differentiates positions. Every controller signal and
+the true plant state are recorded per sample. A diverging plant stops the run cleanly with the
+time and the reason (the record up to then is kept).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from .controllers.base import Command, Controller, Measurement
+from .plant import DivergenceError, Plant
+
+
+@dataclass(frozen=True)
+class SensorModel:
+    """Measurement model (all off by default).
+
+    Attributes:
+        position_noise: std of Gaussian noise on p0x, p0y [m].
+        angle_noise: std of Gaussian noise on phi0, phi1, phi2 [rad].
+        position_quantum, angle_quantum: quantization steps [m], [rad] (0: none).
+        delay: samples of measurement/computation delay (0 or 1).
+        velocity_sensor: give the controller the true velocities (plus velocity_noise).
+        velocity_noise: std of Gaussian noise on the measured velocities [m/s, rad/s].
+    """
+
+    position_noise: float = 0.0
+    angle_noise: float = 0.0
+    position_quantum: float = 0.0
+    angle_quantum: float = 0.0
+    delay: int = 0
+    velocity_sensor: bool = False
+    velocity_noise: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("position_noise", "angle_noise", "position_quantum", "angle_quantum", "velocity_noise"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"sensor.{name} = {v!r} must be finite and >= 0")
+        if self.delay not in (0, 1):
+            raise ValueError(f"sensor.delay = {self.delay!r}; allowed: 0, 1 (samples)")
+
+
+@dataclass
+class RunResult:
+    """A closed-loop run.
+
+    Attributes:
+        t: sample times [s] (N).
+        signals: name -> array (N, ...) of controller signals, thruster forces and the true state
+            (``q_true``, ``qd_true``, ``tip_true``, ``thrust_command``, ``thrust_force``,
+            ``torques``).
+        status: "ok" or "diverged".
+        reason: why it stopped early ("" if ok).
+    """
+
+    t: np.ndarray
+    signals: dict[str, np.ndarray]
+    status: str = "ok"
+    reason: str = ""
+    meta: dict = field(default_factory=dict)
+
+
+def _quantize(x: np.ndarray, quantum: float) -> np.ndarray:
+    return np.round(x / quantum) * quantum if quantum > 0 else x
+
+
+def run_closed_loop(
+    plant: Plant,
+    controller: Controller,
+    duration: float,
+    T: float = 1.0 / 60.0,
+    sensor: SensorModel = SensorModel(),
+    seed: int = 0,
+    warm_start: bool = True,
+    on_sample: Callable[[int, int], None] | None = None,
+) -> RunResult:
+    """Run ``controller`` on ``plant`` for ``duration`` seconds.
+
+    Args:
+        T: controller period [s]; must be a whole number of plant steps.
+        warm_start: start the thrusters' lag state at the first command (the robot is holding
+            station when the run starts) instead of at 0 N; see control-design.md "Start-up".
+        on_sample: progress callback (k, n_samples).
+    """
+    dt = plant.model.opt.timestep
+    sub = T / dt
+    if abs(sub - round(sub)) > 1e-9 or round(sub) < 1:
+        raise ValueError(f"T = {T!r} s must be a whole multiple of the plant timestep {dt!r} s")
+    sub = int(round(sub))
+    n = int(math.floor(duration / T + 1e-9)) + 1
+    rng = np.random.default_rng(seed)
+    rec: dict[str, list] = {}
+    times: list[float] = []
+    status, reason = "ok", ""
+    q_prev_meas = None
+
+    def measure(k: int) -> Measurement:
+        nonlocal q_prev_meas
+        q = plant.q
+        noise = np.r_[rng.normal(0, sensor.position_noise, 2), rng.normal(0, sensor.angle_noise, 3)] \
+            if (sensor.position_noise or sensor.angle_noise) else 0.0
+        q = q + noise
+        q = np.r_[_quantize(q[:2], sensor.position_quantum), _quantize(q[2:], sensor.angle_quantum)]
+        qd = None
+        if sensor.velocity_sensor:
+            qd = plant.qd + (rng.normal(0, sensor.velocity_noise, 5) if sensor.velocity_noise else 0.0)
+        if sensor.delay:
+            q_out = q if q_prev_meas is None else q_prev_meas
+            q_prev_meas = q
+            q = q_out
+        return Measurement(k=k, t=k * T, q=q, qd=qd)
+
+    for k in range(n):
+        meas = measure(k)
+        if k == 0:
+            controller.reset(meas)
+        cmd: Command = controller.compute(meas)
+        if not (np.all(np.isfinite(cmd.thrust)) and np.all(np.isfinite(cmd.torques))):
+            status, reason = "diverged", f"controller output not finite at t = {k * T:.4f} s"
+            break
+        plant.set_thrust(cmd.thrust)
+        plant.set_joint_torques(cmd.torques)
+        if k == 0 and warm_start:
+            plant.data.act[plant._thr_act] = np.clip(cmd.thrust, plant._thr_lo, plant._thr_hi)
+        times.append(k * T)
+        row = dict(cmd.signals)
+        row.update(
+            q_true=plant.q, qd_true=plant.qd, tip_true=plant.tip_position, q_measured=meas.q,
+            thrust_command=np.asarray(cmd.thrust, dtype=float), thrust_force=plant.thruster_forces,
+            torques=np.asarray(cmd.torques, dtype=float),
+        )
+        for key, val in row.items():
+            rec.setdefault(key, []).append(val)
+        if on_sample is not None:
+            on_sample(k, n)
+        if k == n - 1:
+            break
+        try:
+            plant.step(sub)
+        except DivergenceError as exc:
+            status, reason = "diverged", str(exc)
+            break
+    signals = {key: np.asarray(v) for key, v in rec.items()}
+    return RunResult(t=np.asarray(times), signals=signals, status=status, reason=reason,
+                     meta={"T": T, "dt": dt, "seed": seed, "controller": controller.name})
