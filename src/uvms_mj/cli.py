@@ -1,8 +1,10 @@
 """The ``uvms-mj`` command line.
 
-For now one command, ``drift``: the default plant (paper's initial pose, all hydrodynamics on)
-left to itself, its state printed every second. Scenario, run, compare, render and plot
-commands come with the controller and testbed issues.
+* ``paper``: the paper's experiment (Section 4) with and without the disturbance observer, and a
+  metrics table;
+* ``drift``: the plant left to itself from the paper's initial pose, its state every second.
+
+Scenario files, logs, video and plots come with the testbed issue.
 """
 
 from __future__ import annotations
@@ -67,3 +69,54 @@ def drift(seconds: float, current: tuple[float, float], drag: str, overrides: tu
 
 if __name__ == "__main__":
     main()
+
+
+@main.command()
+@click.option("--controllers", default="rac,rac_dob", show_default=True,
+              help="Comma-separated controller names to run (registered: see --list).")
+@click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=40.0, show_default=True,
+              help="Simulated time [s].")
+@click.option("--thruster-lag", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Plant thruster time constant [s] (default: the model's 0.02 s).")
+@click.option("--ideal", is_flag=True, help="Plant identical to the nominal model (no modelling error).")
+@click.option("--list", "list_only", is_flag=True, help="List the registered controllers and exit.")
+def paper(controllers: str, duration: float, thruster_lag: float | None, ideal: bool, list_only: bool) -> None:
+    """Run the paper's experiment with each controller and print RMS / max errors side by side."""
+    from .controllers import ControllerError, available
+    from .experiment import PaperExperiment, metrics
+
+    if list_only:
+        click.echo("\n".join(available()))
+        return
+    names = [c.strip() for c in controllers.split(",") if c.strip()]
+    unknown = [c for c in names if c not in available()]
+    if unknown:
+        raise click.BadParameter(f"unknown controller(s) {', '.join(unknown)}; registered: {', '.join(available())}",
+                                 param_hint="--controllers")
+    over = {} if thruster_lag is None else {"thrusters.tau": thruster_lag}
+    results = {}
+    status = 0
+    for name in names:
+        try:
+            res = PaperExperiment(controller=name, duration=duration, truth=not ideal, plant_overrides=over).run()
+        except (ControllerError, ParameterError, ValueError) as exc:
+            raise click.UsageError(str(exc)) from None
+        if res.status != "ok":
+            click.echo(f"{name}: {res.reason}", err=True)
+            status = 3
+        results[name] = metrics(res)
+    labels = {
+        "base_pos_rms_mm": "base position RMS [mm]", "base_pos_max_mm": "base position max [mm]",
+        "base_att_rms_mrad": "base attitude RMS [mrad]", "base_att_max_mrad": "base attitude max [mrad]",
+        "tip_rms_mm": "end tip RMS [mm]", "tip_max_mm": "end tip max [mm]", "thrust_rms_N": "thrust RMS [N]",
+        "torque_rms_Nm": "joint torque RMS [N m]", "saturated_s": "thrusters saturated [s]",
+    }
+    ratio = len(names) == 2
+    click.echo(f"{'metric':<28}" + "".join(f"{n:>12}" for n in names) + (f"{'ratio':>9}" if ratio else ""))
+    for key, label in labels.items():
+        vals = [results[n][key] for n in names]
+        line = f"{label:<28}" + "".join(f"{v:>12.4g}" for v in vals)
+        if ratio:
+            line += f"{(vals[1] / vals[0] if vals[0] else float('nan')):>9.2f}"
+        click.echo(line)
+    sys.exit(status)

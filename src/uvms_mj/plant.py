@@ -12,6 +12,11 @@ callback, so that plain ``mujoco.mj_step`` / ``mujoco.mj_forward`` on ``plant.mo
 ``mjcb_passive`` is process-global: one dispatcher serves every live plant and leaves
 other models untouched, so several plants (and unrelated MuJoCo models) can live in one
 process. Frames: world X horizontal, Y up; angles counter-clockwise positive.
+
+Two backends compute the same hydrodynamics (``Plant(backend=...)``, default from
+``$UVMS_MJ_BACKEND``, else "auto"): "python", the closed form of :mod:`uvms_mj.hydro` called
+through a ctypes dispatcher, and "native", its C port (:mod:`uvms_mj.native`) installed as the
+callback itself, several times faster; "auto" takes native when a C compiler can build it.
 """
 
 from __future__ import annotations
@@ -28,6 +33,7 @@ from typing import Any, Callable, Mapping, Sequence
 import mujoco
 import numpy as np
 
+from . import native as _native
 from .hydro import HydroModel, HydroTerms
 from .params import (
     JOINT_MOTORS,
@@ -128,18 +134,31 @@ def _dispatch(m_ptr: int | None, d_ptr: int | None) -> None:
 _C_DISPATCH = _PASSIVE_CFUNC(_dispatch)
 
 
-def _install_dispatcher() -> None:
+# The native backend installs its C function uvms_passive as mjcb_passive instead: it serves its
+# registered mjData itself and calls _C_DISPATCH (set as its fallback) for every other mjData,
+# so Python-backed plants and the unregistered-data warning keep working alongside it.
+_NATIVE_LIB: _native.NativeLib | None = None  # set once a native plant exists
+
+
+def _install_dispatcher(lib: _native.NativeLib | None = None) -> None:
+    """Make mjcb_passive ours: the native callback if ``lib`` is given or already installed,
+    else the Python dispatcher."""
+    global _NATIVE_LIB
     current = mujoco.get_mjcb_passive()
-    if current is _C_DISPATCH:
+    if lib is not None:
+        lib.set_fallback(_C_DISPATCH)
+        _NATIVE_LIB = lib
+    ours = _NATIVE_LIB.passive if _NATIVE_LIB is not None else _C_DISPATCH
+    if current is ours:
         return
-    if current is not None:
+    if current is not None and current is not _C_DISPATCH:
         warnings.warn(
             f"replacing an existing mjcb_passive callback ({current!r}): uvms_mj needs it for "
             "its hydrodynamics; other models are left untouched",
             RuntimeWarning,
             stacklevel=3,
         )
-    mujoco.set_mjcb_passive(_C_DISPATCH)
+    mujoco.set_mjcb_passive(ours)
 
 
 def _register(model: mujoco.MjModel, data: mujoco.MjData, handler: Callable[[], None]) -> None:
@@ -151,6 +170,19 @@ def _register(model: mujoco.MjModel, data: mujoco.MjData, handler: Callable[[], 
     weakref.finalize(model, _unregister_model, model._address)
 
 
+def _register_native(
+    lib: _native.NativeLib, model: mujoco.MjModel, data: mujoco.MjData, params: _native.Params
+) -> None:
+    with _LOCK:
+        _install_dispatcher(lib)
+        if lib.register(data._address, params) < 0:
+            raise RuntimeError("too many live MjData served by the native hydrodynamics (registry full)")
+        _PLANT_MODELS.add(model._address)  # its unregistered data still get the Python warning
+    # The finalizer holds params alive until the C registry has let go of it.
+    weakref.finalize(data, _unregister_native_data, lib, data._address, params)
+    weakref.finalize(model, _unregister_model, model._address)
+
+
 # Finalizers may run from the garbage collector at any point, even while _LOCK is held by this
 # thread: they take no lock (single dict/set operations are atomic under the GIL).
 def _unregister_data(addr: int) -> None:
@@ -158,8 +190,32 @@ def _unregister_data(addr: int) -> None:
     _FAILURES.pop(addr, None)
 
 
+def _unregister_native_data(lib: _native.NativeLib, addr: int, params: _native.Params) -> None:
+    lib.unregister(addr)  # lock-free in C
+    _FAILURES.pop(addr, None)
+
+
 def _unregister_model(addr: int) -> None:
     _PLANT_MODELS.discard(addr)
+
+
+def _resolve_backend(requested: str | None, terms: HydroTerms) -> _native.NativeLib | None:
+    """The native library for the requested backend, or None for the Python backend."""
+    if requested is None:
+        try:
+            requested = _native.backend_from_env()
+        except ValueError as exc:
+            raise ParameterError(str(exc)) from None
+    if requested not in _native.BACKENDS:
+        raise ParameterError(f"backend = {requested!r}; allowed: {', '.join(_native.BACKENDS)}")
+    if requested == "python" or terms.added_mass == "lagged":  # lagged exists only in Python
+        return None
+    if requested == "native":
+        return _native.require()
+    lib = _native.load()
+    if lib is None:
+        _native.warn_unavailable_once()
+    return lib
 
 
 # --------------------------------------------------------------------------- plant
@@ -178,9 +234,16 @@ class Plant:
         dead_zone: zero thrust commands inside the thrusters' dead zone.
         timestep, integrator: override the model's (e.g. ``integrator="RK4"``).
         max_speed: runaway threshold on sum |q_dot_i| (m/s and rad/s together).
+        backend: "native" (the C hydrodynamics, built on first use), "python" (the reference
+            implementation) or "auto" (native if it can be built, else python with a one-time
+            warning); default: ``$UVMS_MJ_BACKEND``, else "auto". ``added_mass="lagged"``
+            always runs in Python. :attr:`backend` tells which one is in use.
 
     Raises:
-        ParameterError: missing file, missing element or a non-physical parameter.
+        ParameterError: missing file, missing element, a non-physical parameter or an
+            unknown backend.
+        uvms_mj.native.NativeUnavailableError: backend "native" requested but it cannot be
+            built (e.g. no C compiler); the message says why.
     """
 
     def __init__(
@@ -195,6 +258,7 @@ class Plant:
         timestep: float | None = None,
         integrator: str | None = None,
         max_speed: float = 100.0,
+        backend: str | None = None,
     ) -> None:
         path = Path(model) if model is not None else default_model_path()
         if not path.is_file():
@@ -228,6 +292,9 @@ class Plant:
             raise ParameterError(f"max_speed = {max_speed!r} must be > 0")
         if not isinstance(terms, HydroTerms):
             raise ParameterError(f"terms = {terms!r} must be a HydroTerms")
+        self._native_lib = _resolve_backend(backend, terms)
+        #: The hydrodynamics backend in use: "native" or "python".
+        self.backend = "native" if self._native_lib is not None else "python"
 
         self.params: RobotParams = read_params(m)
         self.terms = terms
@@ -249,6 +316,7 @@ class Plant:
             raise ParameterError("the mass matrix must be dense 5x5 (a planar chain of 5 dofs)")
 
         self._diverged: tuple[float, str] | None = None
+        self._native_state: _native.Params | None = None  # native callback state of self.data
         self._install()
         self.reset()
 
@@ -287,6 +355,14 @@ class Plant:
     def _attach(self, d: mujoco.MjData) -> None:
         """Register the passive-force handler of data ``d``: it adds the exact added-mass
         matrix to d.M (then refactors it) and the hydrodynamic forces to d.qfrc_passive."""
+        if self._native_lib is not None:
+            # The C callback does all of passive() below natively, with its own copy of the
+            # constants and per-data state (added-mass guard, divergence status).
+            params = _native.make_params(self.hydro, self.max_speed)
+            _register_native(self._native_lib, self.model, d, params)
+            if d is self.data:
+                self._native_state = params
+            return
         m = self.model
         evaluate = self.hydro.evaluate
         exact = self.terms.added_mass == "exact"
@@ -346,6 +422,8 @@ class Plant:
                 raise ParameterError(f"model has no keyframe named {keyframe!r}")
             mujoco.mj_resetDataKeyframe(m, d, k)
         self._diverged = None
+        if self._native_state is not None:
+            self._native_state.status = _native.STATUS_OK
         mujoco.mj_forward(m, d)
 
     def set_state(
@@ -453,11 +531,20 @@ class Plant:
         self._check()
         step = mujoco.mj_step
         t = d.time
-        for _ in range(n):
-            step(m, d)
-            if self._diverged is not None or _FAILURES or d.time <= t:
-                break
-            t = d.time
+        native = self._native_state
+        if native is not None:
+            for _ in range(n):
+                step(m, d)
+                if native.status or _FAILURES or d.time <= t:
+                    break
+                t = d.time
+            self._sync_native()
+        else:
+            for _ in range(n):
+                step(m, d)
+                if self._diverged is not None or _FAILURES or d.time <= t:
+                    break
+                t = d.time
         # MuJoCo resets the state itself on a bad qpos/qvel/qacc (and restarts time): never let
         # that pass silently. t is the time at the start of the step that failed.
         for w in (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQVEL, mujoco.mjtWarning.mjWARN_BADQPOS):
@@ -465,7 +552,20 @@ class Plant:
                 self._diverged = (float(t), f"non-finite or huge state ({w.name}; MuJoCo reset the state)")
         self._check()
 
+    def _sync_native(self) -> None:
+        """Turn the native callback's divergence status of self.data into ``_diverged``
+        (the same record as the Python handler's ``flag``)."""
+        st = self._native_state
+        if st is None or not st.status or self._diverged is not None:
+            return
+        if st.status == _native.STATUS_NONFINITE:
+            what = "non-finite state (NaN or inf)"
+        else:
+            what = f"runaway: sum |q_dot| = {st.status_speed:.3g} > max_speed = {self.max_speed:g}"
+        self._diverged = (float(st.status_time), what)
+
     def _check(self) -> None:
+        self._sync_native()
         exc = _FAILURES.pop(self.data._address, None)
         if exc is not None:
             raise RuntimeError(f"the hydrodynamics callback failed at t = {self.time:.4f} s: {exc!r}") from exc
