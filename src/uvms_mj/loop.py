@@ -82,6 +82,7 @@ def run_closed_loop(
     seed: int = 0,
     warm_start: bool = True,
     on_sample: Callable[[int, int], None] | None = None,
+    sink: Callable[[float, dict], None] | None = None,
 ) -> RunResult:
     """Run ``controller`` on ``plant`` for ``duration`` seconds.
 
@@ -90,6 +91,9 @@ def run_closed_loop(
         warm_start: start the thrusters' lag state at the first command (the robot is holding
             station when the run starts) instead of at 0 N; see control-design.md "Start-up".
         on_sample: progress callback (k, n_samples).
+        sink: called with (t, row) for every sample as it happens (e.g. an MCAP recorder's
+            ``write_sample``), row mapping signal names to floats, ints, bools or 1-D arrays;
+            the same rows make up the returned :class:`RunResult`.
     """
     dt = plant.model.opt.timestep
     sub = T / dt
@@ -140,6 +144,8 @@ def run_closed_loop(
         )
         for key, val in row.items():
             rec.setdefault(key, []).append(val)
+        if sink is not None:
+            sink(k * T, row)
         if on_sample is not None:
             on_sample(k, n)
         if k == n - 1:
