@@ -164,3 +164,15 @@ def test_extra_data():
         plant_module._warned_unregistered = False
         mujoco.mj_step(plant.model, stray)
     assert any(re.search("without hydrodynamics", str(w.message)) for w in caught)
+
+
+def test_tip_position_is_current_after_steps():
+    """After mj_step, MuJoCo's site_xpos lags the state (RK4: an intermediate stage); the
+    accessor must give the tip of the current qpos (analytic Eq. 1, 1e-12)."""
+    from uvms_mj.kinematics import ArmGeometry, tip_position
+
+    plant = Plant()
+    plant.set_state(joint_velocities=(1.0, -1.0))
+    plant.step(5)
+    geom = ArmGeometry.from_params(plant.params)
+    np.testing.assert_allclose(plant.tip_position, tip_position(geom, plant.q), rtol=0, atol=1e-12)

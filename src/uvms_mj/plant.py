@@ -480,8 +480,14 @@ class Plant:
 
     @property
     def tip_position(self) -> np.ndarray:
-        """End-tip position (x, y) in the world frame [m] (valid after a step or set_state)."""
-        return self.data.site_xpos[self._tip, :2].copy()
+        """End-tip position (x, y) in the world frame [m] at the current state.
+
+        Computed from ``data.qpos`` (on a scratch MjData): after ``mj_step`` MuJoCo's own
+        ``site_xpos`` still holds the start of the step (Euler) or an intermediate RK4 stage."""
+        s = self._scratch
+        s.qpos[:] = self.data.qpos
+        mujoco.mj_kinematics(self.model, s)
+        return s.site_xpos[self._tip, :2].copy()
 
     @property
     def thruster_forces(self) -> np.ndarray:

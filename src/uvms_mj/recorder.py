@@ -1,0 +1,1139 @@
+"""Record closed-loop runs to MCAP (Foxglove-ready) and read them back.
+
+A log is written incrementally while the run goes (:class:`McapRecorder`, whose
+:meth:`~McapRecorder.write_sample` is the loop's ``sink``) and can be read back into an object
+that works wherever a :class:`~uvms_mj.loop.RunResult` does (:func:`read_log`), including a log
+cut short by ``kill -9`` (it is then read up to the last flush and marked ``truncated``).
+
+Encoding: every channel is JSON (``message_encoding="json"``) with a JSON schema
+(``schema_encoding="jsonschema"``), in zstd-compressed chunks. Floats are written with Python's
+shortest round-trip repr, so float64 values come back bit for bit; NaN is written as ``null``
+and +-inf as ``+-1e999`` (both read back as such by Python and by Foxglove's JSON parser).
+
+Channel layout (times are simulation time: ``log_time = publish_time = round(t * 1e9)`` ns
+from the run's start, so Foxglove shows 1970-01-01 00:00:00 + t; the MCAP message ``sequence``
+is the sample index k):
+
+=====================  =======================  ==============================================
+topic                  schema                   content and rate
+=====================  =======================  ==============================================
+``/tf``                foxglove.FrameTransforms ``view -> world -> base -> link1 -> link2 ->
+                                                tip``: ``world -> ...`` from ``q_true`` and the
+                                                robot parameters; ``view -> world`` is a fixed
+                                                +90 deg about x, so that with display frame
+                                                ``view`` the world's Y-up plane stands upright
+                                                in Foxglove's Z-up 3D view (display frame
+                                                ``world`` shows it from above). One message per
+                                                sample (60 Hz with the paper's T).
+``/scene``             foxglove.SceneUpdate     the robot: frame-locked cubes ``base``,
+                                                ``link1``, ``link2`` (box sizes and centres from
+                                                the parameters), thruster axes, a tip sphere;
+                                                once, at the first sample.
+``/scene/paths``       foxglove.SceneUpdate     line strips in ``world``: desired tip path
+                                                (from ``p_desired[3:5]``, green) and true tip
+                                                path (``tip_true``, red), points every
+                                                ``path_resolution`` s; the whole path so far,
+                                                re-sent every ``path_period`` s of run time and
+                                                at close (so seeking in Foxglove always shows it).
+``/joint_states``      uvms_mj.JointStates      names, ``position`` = q_true,
+                                                ``velocity`` = qd_true; one per sample.
+``/state/true``        uvms_mj.TrueState        ``t`` and the true plant state ``q_true``,
+                                                ``qd_true``, ``tip_true``; one per sample.
+``/control``           uvms_mj.ControlSample    ``t`` and every other per-sample signal (the
+                                                controller's signals, ``q_measured``, thruster
+                                                and torque commands...) as top-level fields;
+                                                one per sample.
+=====================  =======================  ==============================================
+
+Per-sample signals are plotted in Foxglove's Plot panel with message paths such as
+``/control.e_p[3]``, ``/control.det_B`` or ``/state/true.q_true[2]``. Booleans are written as
+0/1 integers (so that they plot) and arrays of two or more dimensions are flattened row-major
+(Foxglove's JSON-schema parser rejects nested arrays); each sample channel's metadata
+(``uvms_mj.signals``) keeps every signal's dtype, shape and position in the row, which
+:func:`read_log` uses to give back exactly the loop's arrays (same names, order, shapes and
+dtypes). Signals are discovered from
+the first row; a name that first appears later is dropped with a warning, and non-numeric values
+are not recorded.
+
+Metadata records: ``uvms_mj`` (written at creation) holds the caller's metadata dict plus
+``versions`` (uvms_mj, mujoco, numpy, mcap, python), ``git_commit`` / ``git_dirty`` (when the
+package runs from a git checkout), ``robot_params``, ``created_utc`` and ``log_format``;
+``uvms_mj.status`` (written at close) holds ``status`` ("ok", "diverged", "interrupted",
+"error"...), ``reason`` and any run metadata given to :meth:`McapRecorder.close`. Each value
+is stored as JSON text (MCAP metadata is string -> string).
+
+Durability: data reaches the file at least every ``flush_interval`` seconds of wall-clock time
+while samples arrive (checked at each sample, and always after the first one: the chunk in
+progress is finished and the file object flushed), so a process killed with
+``kill -9`` leaves a log readable (by :func:`read_log`, not by MCAP's indexed readers) up to the
+last flush. Exceptions, KeyboardInterrupt and (inside :func:`handle_sigterm`) SIGTERM close
+the log cleanly with a status record.
+
+Typical use (e.g. in the CLI)::
+
+    with handle_sigterm(), McapRecorder(path, plant.params, metadata) as rec:
+        result = run_closed_loop(plant, ctrl, duration, sink=rec.write_sample)
+        rec.close(result.status, result.reason, meta=result.meta)
+    log = read_log(path)      # log.t, log.signals, log.status, log.meta, log.truncated
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime as _dt
+import io
+import json
+import math
+import os
+import platform
+import re
+import signal
+import struct
+import subprocess
+import sys
+import threading
+import time
+import warnings
+from contextlib import contextmanager
+from dataclasses import dataclass
+from importlib import metadata as _importlib_metadata
+from pathlib import Path
+from typing import Any, Iterator, Mapping
+
+import numpy as np
+from mcap.exceptions import McapError
+from mcap.records import Channel, Chunk, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.writer import CompressionType, Writer
+
+from .loop import RunResult
+from .params import ARM_JOINTS, BASE_JOINTS, BodyParams, RobotParams, ThrusterParams
+
+__all__ = [
+    "LOG_FORMAT",
+    "LogData",
+    "McapRecorder",
+    "Terminated",
+    "format_info",
+    "handle_sigterm",
+    "iter_messages",
+    "log_info",
+    "provenance",
+    "read_log",
+]
+
+#: Version of the layout described in the module docstring (stored in the metadata).
+LOG_FORMAT = 1
+METADATA_NAME = "uvms_mj"
+STATUS_NAME = "uvms_mj.status"
+#: Signals that go to ``/state/true``; every other signal goes to ``/control``.
+STATE_SIGNALS = ("q_true", "qd_true", "tip_true")
+TOPIC_CONTROL = "/control"
+TOPIC_STATE = "/state/true"
+TOPIC_TF = "/tf"
+TOPIC_SCENE = "/scene"
+TOPIC_PATHS = "/scene/paths"
+TOPIC_JOINTS = "/joint_states"
+#: Per-sample channels whose messages make up the signals (a sample is complete when all the
+#: log's sample channels hold its message).
+SAMPLE_TOPICS = (TOPIC_CONTROL, TOPIC_STATE)
+#: Metadata keys the recorder adds itself (a caller's metadata must not use them).
+RESERVED_KEYS = ("versions", "git_commit", "git_dirty", "robot_params", "created_utc", "log_format")
+JOINT_NAMES = BASE_JOINTS + ARM_JOINTS
+_MAGIC = b"\x89MCAP0\r\n"
+_OP_FOOTER = 0x02
+
+# --------------------------------------------------------------------------- JSON schemas
+# The foxglove.* schemas follow the published JSON schemas (github.com/foxglove/foxglove-sdk,
+# schemas/jsonschema), without descriptions and without the optional message_id/lineage fields.
+
+
+def _num() -> dict:
+    return {"type": "number"}
+
+
+def _obj(title: str | None, props: dict, required: bool = True, description: str | None = None) -> dict:
+    out: dict = {}
+    if title:
+        out["title"] = title
+    if description:
+        out["description"] = description
+    out["type"] = "object"
+    out["properties"] = props
+    if required:
+        out["required"] = list(props)
+    return out
+
+
+def _arr(items: dict, description: str | None = None) -> dict:
+    out = {"type": "array", "items": items}
+    if description:
+        out["description"] = description
+    return out
+
+
+def _time_schema() -> dict:
+    return {"type": "object", "title": "time", "properties": {
+        "sec": {"type": "integer", "minimum": 0},
+        "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999}}}
+
+
+def _duration_schema() -> dict:
+    return {"type": "object", "title": "duration", "properties": {
+        "sec": {"type": "integer"},
+        "nsec": {"type": "integer", "minimum": 0, "maximum": 999999999}}}
+
+
+def _vec3() -> dict:
+    return _obj("foxglove.Vector3", {"x": _num(), "y": _num(), "z": _num()})
+
+
+def _point3() -> dict:
+    return _obj("foxglove.Point3", {"x": _num(), "y": _num(), "z": _num()})
+
+
+def _quat() -> dict:
+    return _obj("foxglove.Quaternion", {"x": _num(), "y": _num(), "z": _num(), "w": _num()})
+
+
+def _color_schema() -> dict:
+    return _obj("foxglove.Color", {"r": _num(), "g": _num(), "b": _num(), "a": _num()})
+
+
+def _pose() -> dict:
+    return _obj("foxglove.Pose", {"position": _vec3(), "orientation": _quat()})
+
+
+def _enum(title: str, names: tuple[str, ...]) -> dict:
+    return {"title": title, "oneOf": [{"title": n, "const": i} for i, n in enumerate(names)]}
+
+
+def _frame_transforms_schema() -> dict:
+    tf = _obj("foxglove.FrameTransform", {
+        "timestamp": _time_schema(), "parent_frame_id": {"type": "string"},
+        "child_frame_id": {"type": "string"}, "translation": _vec3(), "rotation": _quat()})
+    return _obj("foxglove.FrameTransforms", {"transforms": _arr(tf)},
+                description="An array of FrameTransform messages")
+
+
+def _scene_update_schema() -> dict:
+    idx = _arr({"type": "integer", "minimum": 0})
+    prims = {
+        "arrows": _obj("foxglove.ArrowPrimitive", {
+            "pose": _pose(), "shaft_length": _num(), "shaft_diameter": _num(), "head_length": _num(),
+            "head_diameter": _num(), "color": _color_schema()}),
+        "cubes": _obj("foxglove.CubePrimitive", {"pose": _pose(), "size": _vec3(), "color": _color_schema()}),
+        "spheres": _obj("foxglove.SpherePrimitive", {"pose": _pose(), "size": _vec3(), "color": _color_schema()}),
+        "cylinders": _obj("foxglove.CylinderPrimitive", {
+            "pose": _pose(), "size": _vec3(), "bottom_scale": _num(), "top_scale": _num(), "color": _color_schema()}),
+        "lines": _obj("foxglove.LinePrimitive", {
+            "type": _enum("foxglove.LineType", ("LINE_STRIP", "LINE_LOOP", "LINE_LIST")),
+            "pose": _pose(), "thickness": _num(), "scale_invariant": {"type": "boolean"},
+            "points": _arr(_point3()), "color": _color_schema(), "colors": _arr(_color_schema()), "indices": idx}),
+        "triangles": _obj("foxglove.TriangleListPrimitive", {
+            "pose": _pose(), "points": _arr(_point3()), "color": _color_schema(), "colors": _arr(_color_schema()),
+            "indices": idx}),
+        "texts": _obj("foxglove.TextPrimitive", {
+            "pose": _pose(), "billboard": {"type": "boolean"}, "font_size": _num(),
+            "scale_invariant": {"type": "boolean"}, "color": _color_schema(), "text": {"type": "string"}}),
+        "models": _obj("foxglove.ModelPrimitive", {
+            "pose": _pose(), "scale": _vec3(), "color": _color_schema(), "override_color": {"type": "boolean"},
+            "url": {"type": "string"}, "media_type": {"type": "string"},
+            "data": {"type": "string", "contentEncoding": "base64"}}),
+    }
+    entity = _obj("foxglove.SceneEntity", {
+        "timestamp": _time_schema(), "frame_id": {"type": "string"}, "id": {"type": "string"},
+        "lifetime": _duration_schema(), "frame_locked": {"type": "boolean"},
+        "metadata": _arr(_obj("foxglove.KeyValuePair", {"key": {"type": "string"}, "value": {"type": "string"}})),
+        **{k: _arr(v) for k, v in prims.items()}})
+    deletion = _obj("foxglove.SceneEntityDeletion", {
+        "timestamp": _time_schema(), "type": _enum("foxglove.SceneEntityDeletionType", ("MATCHING_ID", "ALL")),
+        "id": {"type": "string"}})
+    return _obj("foxglove.SceneUpdate", {"deletions": _arr(deletion), "entities": _arr(entity)},
+                description="An update to the entities displayed in a 3D scene")
+
+
+def _joint_states_schema() -> dict:
+    return _obj("uvms_mj.JointStates", {
+        "timestamp": _time_schema(),
+        "name": _arr({"type": "string"}, "joint names (MuJoCo joint order)"),
+        "position": _arr(_num(), "true joint positions q [m, rad]"),
+        "velocity": _arr(_num(), "true joint velocities qd [m/s, rad/s]"),
+    }, description="Joint states of the robot (Foxglove has no JointStates schema)")
+
+
+_JSON_TYPE = {"b": "integer", "i": "integer", "u": "integer", "f": "number"}
+
+
+def _sample_schema(title: str, description: str, layout: list[dict]) -> dict:
+    props: dict = {"timestamp": _time_schema(),
+                   "t": {"type": "number", "description": "sample time [s] (exact float)"}}
+    for sig in layout:
+        item: dict = {"type": _JSON_TYPE[np.dtype(sig["dtype"]).kind]}
+        notes = ["boolean as 0/1"] if sig["dtype"] == "bool" else []
+        shape = sig["shape"]
+        if len(shape) > 1:
+            notes.append(f"shape {tuple(shape)} flattened row-major")
+        if notes:
+            item["description"] = "; ".join(notes)
+        if shape:
+            n = int(np.prod(shape))
+            item = {"type": "array", "items": item, "minItems": n, "maxItems": n}
+        props[sig["name"]] = item
+    return _obj(title, props, description=description + " (null = NaN, +-1e999 = +-inf)")
+
+
+#: Published-schema equivalents, by schema name (exposed for tests and tools).
+SCHEMAS: dict[str, dict] = {
+    "foxglove.FrameTransforms": _frame_transforms_schema(),
+    "foxglove.SceneUpdate": _scene_update_schema(),
+    "uvms_mj.JointStates": _joint_states_schema(),
+}
+
+# --------------------------------------------------------------------------- encoding helpers
+
+_NONFINITE = re.compile(r'"(?:[^"\\]|\\.)*"|-?Infinity|NaN')
+
+
+def _nonfinite_sub(m: re.Match) -> str:
+    s = m.group(0)
+    if s[0] == '"':
+        return s
+    return "null" if s == "NaN" else s.replace("Infinity", "1e999")
+
+
+_ENCODER = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
+_ENCODER_NAN = json.JSONEncoder(separators=(",", ":"), allow_nan=True)
+
+
+def _enc(obj: Any) -> str:
+    """Compact JSON text of a list or dict; NaN -> null, +-inf -> +-1e999 (valid JSON that
+    Python and JavaScript parse back to +-inf)."""
+    try:
+        return _ENCODER.encode(obj)
+    except ValueError:
+        return _NONFINITE.sub(_nonfinite_sub, _ENCODER_NAN.encode(obj))
+
+
+def _dumps(obj: Any) -> bytes:
+    return _enc(obj).encode()
+
+
+def _json_default(o: Any) -> Any:
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, np.generic):
+        return o.item()
+    if dataclasses.is_dataclass(o) and not isinstance(o, type):
+        return dataclasses.asdict(o)
+    if hasattr(o, "model_dump"):  # pydantic
+        return o.model_dump(mode="json")
+    if isinstance(o, (set, frozenset)):
+        return sorted(o, key=str)
+    return str(o)
+
+
+def _meta_value(v: Any) -> str:
+    return json.dumps(v, sort_keys=True, default=_json_default)
+
+
+def _ns(t: float) -> int:
+    ns = int(round(float(t) * 1e9))
+    if ns < 0:
+        raise ValueError(f"sample time t = {t!r} s must be >= 0")
+    return ns
+
+
+def _stamp(ns: int) -> dict:
+    sec, nsec = divmod(ns, 1_000_000_000)
+    return {"sec": sec, "nsec": nsec}
+
+
+def _quat_z(angle: float) -> dict:
+    """Rotation by ``angle`` about +Z, Foxglove order (x, y, z, w)."""
+    h = 0.5 * float(angle)
+    return {"x": 0.0, "y": 0.0, "z": math.sin(h), "w": math.cos(h)}
+
+
+_IDENTITY = {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}
+_ZERO3 = {"x": 0.0, "y": 0.0, "z": 0.0}
+
+
+def _color(r: float, g: float, b: float, a: float = 1.0) -> dict:
+    return {"r": r, "g": g, "b": b, "a": a}
+
+
+def _entity(frame_id: str, id: str, stamp: dict, frame_locked: bool = True, **prims: list) -> dict:
+    ent = {"timestamp": stamp, "frame_id": frame_id, "id": id, "lifetime": {"sec": 0, "nsec": 0},
+           "frame_locked": frame_locked, "metadata": []}
+    for key in ("arrows", "cubes", "spheres", "cylinders", "lines", "triangles", "texts", "models"):
+        ent[key] = list(prims.pop(key, []))
+    if prims:
+        raise TypeError(f"unknown primitive lists {sorted(prims)}")
+    return ent
+
+
+# --------------------------------------------------------------------------- provenance
+
+
+def _version(dist: str, module: str | None = None) -> str | None:
+    try:
+        return _importlib_metadata.version(dist)
+    except Exception:
+        pass
+    if module:
+        try:
+            return str(__import__(module).__version__)
+        except Exception:
+            pass
+    return None
+
+
+def _git_info() -> dict:
+    """Commit (and whether the tree is dirty) of the checkout this package runs from; {} when
+    it does not run from a git checkout of its own, or git is missing (never raises)."""
+    pkg = Path(__file__).resolve().parent
+    try:
+        out = subprocess.run(["git", "-C", str(pkg), "rev-parse", "--show-toplevel", "HEAD"],
+                             capture_output=True, text=True, timeout=5)
+        if out.returncode != 0:
+            return {}
+        top, commit = out.stdout.split()
+        top = Path(top).resolve()
+        # Only the package's own repository (an editable install), not a repository that
+        # happens to contain a site-packages directory.
+        if pkg.parent.parent != top or not (top / "pyproject.toml").is_file():
+            return {}
+        info: dict = {"git_commit": commit}
+        st = subprocess.run(["git", "-C", str(top), "status", "--porcelain", "--untracked-files=no"],
+                            capture_output=True, text=True, timeout=5)
+        if st.returncode == 0:
+            info["git_dirty"] = bool(st.stdout.strip())
+        return info
+    except Exception:
+        return {}
+
+
+def provenance() -> dict:
+    """Package versions and, when available, the git commit of the uvms_mj checkout."""
+    from . import __version__
+
+    versions = {
+        "uvms_mj": _version("uvms-mj") or __version__,
+        "mujoco": _version("mujoco", "mujoco"),
+        "numpy": np.__version__,
+        "mcap": _version("mcap"),
+        "python": platform.python_version(),
+    }
+    return {"versions": versions, **_git_info()}
+
+
+# --------------------------------------------------------------------------- signals
+
+_critical_depth = 0
+_pending: BaseException | None = None
+
+
+class Terminated(KeyboardInterrupt):
+    """Raised (inside :func:`handle_sigterm`) when the process gets SIGTERM."""
+
+
+def _deliver_pending() -> None:
+    global _pending
+    if _critical_depth == 0 and _pending is not None:
+        exc, _pending = _pending, None
+        raise exc
+
+
+@contextmanager
+def _critical() -> Iterator[None]:
+    """A section that the handlers of :func:`handle_sigterm` do not interrupt (the signal's
+    exception is raised when the section ends)."""
+    global _critical_depth
+    _critical_depth += 1
+    try:
+        yield
+    finally:
+        _critical_depth -= 1
+    _deliver_pending()
+
+
+@contextmanager
+def handle_sigterm(sigint: bool = True) -> Iterator[None]:
+    """Turn SIGTERM into :class:`Terminated` (a KeyboardInterrupt) while the block runs, so that
+    ``with`` blocks (an :class:`McapRecorder`) close cleanly; the old handlers come back after.
+
+    With ``sigint`` (default) SIGINT is handled the same way (raising KeyboardInterrupt). Either
+    signal arriving while a recorder is writing a sample or closing is held back until that
+    write is over, so a log is never left with half a record. Outside the main thread (where
+    Python cannot set handlers) this does nothing.
+    """
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def on_signal(signum, frame):  # noqa: ARG001
+        global _pending
+        if signum == signal.SIGTERM:
+            exc: BaseException = Terminated("terminated by SIGTERM")
+        else:
+            exc = KeyboardInterrupt("interrupted by SIGINT")
+        if _critical_depth:
+            if _pending is None:
+                _pending = exc
+            return
+        raise exc
+
+    old = {signal.SIGTERM: signal.signal(signal.SIGTERM, on_signal)}
+    if sigint:
+        old[signal.SIGINT] = signal.signal(signal.SIGINT, on_signal)
+    try:
+        yield
+    finally:
+        global _pending
+        for sig, handler in old.items():
+            # None: a handler not set from Python, which cannot be put back; use the default.
+            signal.signal(sig, signal.SIG_DFL if handler is None else handler)
+        held, _pending = _pending, None
+        if held is not None and sys.exc_info()[0] is None:
+            raise held  # a signal held back by the last write: deliver it now
+
+
+# --------------------------------------------------------------------------- recorder
+
+
+def _layout_entry(name: str, value: Any, index: int) -> dict | None:
+    arr = np.asarray(value)
+    if arr.dtype.kind not in "biuf":
+        return None
+    return {"name": name, "dtype": arr.dtype.name, "shape": list(arr.shape), "index": index}
+
+
+def _encode(value: Any, is_bool: bool, flat: bool) -> Any:
+    """A signal value as JSON-ready Python numbers: booleans as 0/1, arrays of 2 or more
+    dimensions flattened (row-major; Foxglove's JSON-schema parser rejects nested arrays)."""
+    if type(value) is np.ndarray and not flat:
+        return (value.astype(np.uint8) if is_bool else value).tolist()
+    if not (is_bool or flat) and isinstance(value, (float, int)) and not isinstance(value, bool):
+        return value
+    arr = np.asarray(value)
+    if is_bool:
+        arr = arr.astype(np.uint8)
+    return (arr.ravel() if flat else arr).tolist()
+
+
+def _point(x: float, y: float) -> str:
+    """A foxglove.Point3 in the plane (JSON text), rounded to 1 um."""
+    return '{"x":%r,"y":%r,"z":0.0}' % (round(x, 6), round(y, 6))
+
+
+def _tf_template(chain: list[tuple[str, str, tuple[float, float] | None, dict | None]]) -> str:
+    """``%``-template of a /tf message. Each link is (parent, child, translation, rotation):
+    translation None is the base's (x, y) (template keys ``x``, ``y``), rotation None the
+    i-th variable rotation about +Z (keys ``z<i>``, ``w<i>``); fixed values are baked in."""
+    parts, var = [], 0
+    for parent, child, off, rot in chain:
+        head = '{"timestamp":%%(stamp)s,"parent_frame_id":%s,"child_frame_id":%s,' % (
+            json.dumps(parent), json.dumps(child))
+        if off is None:
+            tr = '"translation":{"x":%(x)s,"y":%(y)s,"z":0.0},'
+        else:
+            tr = '"translation":{"x":%r,"y":%r,"z":0.0},' % (float(off[0]), float(off[1]))
+        if rot is None:
+            rt = '"rotation":{"x":0.0,"y":0.0,"z":%%(z%d)s,"w":%%(w%d)s}}' % (var, var)
+            var += 1
+        else:
+            rt = '"rotation":' + json.dumps(rot, separators=(",", ":")).replace("%", "%%") + "}"
+        parts.append(head + tr + rt)
+    return '{"transforms":[' + ",".join(parts) + "]}"
+
+
+class McapRecorder:
+    """Writes a run to an MCAP file as it happens (see the module docstring for the layout).
+
+    Args:
+        path: output file (parent directories are created; an existing file is replaced).
+        params: the plant's robot parameters (geometry of the frames and the scene).
+        metadata: JSON-able run description (resolved scenario, seed, ...), stored in the
+            ``uvms_mj`` metadata record; keys in :data:`RESERVED_KEYS` are not allowed.
+        flush_interval: the longest wall-clock time [s] between flushes to the file (0: flush
+            after every sample).
+        path_period: run time [s] between re-sends of the tip paths on ``/scene/paths``.
+        path_resolution: run time [s] between stored path points.
+        chunk_size: MCAP chunk size [bytes] (a chunk is also finished at every flush).
+        compression: "zstd", "lz4" or "none".
+
+    Use it as a context manager: leaving the block closes the log, with status "ok", or
+    "interrupted" on KeyboardInterrupt (and SIGTERM inside :func:`handle_sigterm`), or "error"
+    on another exception, unless :meth:`close` was called first with the run's status.
+    """
+
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        params: RobotParams,
+        metadata: Mapping[str, Any] | None = None,
+        flush_interval: float = 1.0,
+        *,
+        path_period: float = 1.0,
+        path_resolution: float = 0.1,
+        chunk_size: int = 512 * 1024,
+        compression: str = "zstd",
+    ) -> None:
+        if not (flush_interval >= 0 and math.isfinite(flush_interval)):
+            raise ValueError(f"flush_interval = {flush_interval!r} s must be finite and >= 0")
+        metadata = dict(metadata or {})
+        clash = sorted(set(metadata) & set(RESERVED_KEYS + ("status", "reason")))
+        if clash:
+            raise ValueError(f"metadata keys {clash} are reserved by the recorder")
+        comp = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
+        if compression not in comp:
+            raise ValueError(f"compression = {compression!r}; allowed: {sorted(comp)}")
+        self.path = Path(path)
+        self.params = params
+        self.flush_interval = float(flush_interval)
+        self.path_period = float(path_period)
+        self.path_resolution = float(path_resolution)
+        self.samples = 0
+        self.closed = False
+        self.status: str | None = None
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        self._file = open(self.path, "wb")
+        try:
+            self._writer = Writer(self._file, chunk_size=chunk_size, compression=comp[compression])
+            self._writer.start(profile="", library=f"uvms_mj {_version('uvms-mj') or ''} / mcap")
+            record = dict(metadata)
+            record.update(provenance())
+            record["robot_params"] = dataclasses.asdict(params) if params is not None else None
+            record["created_utc"] = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+            record["log_format"] = LOG_FORMAT
+            self._writer.add_metadata(METADATA_NAME, {k: _meta_value(v) for k, v in record.items()})
+            self._writer.flush()
+        except BaseException:
+            self._file.close()
+            raise
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, int] = {}
+        self._sample_channels: list[tuple[int, list[tuple[str, bool, bool]]]] = []
+        self._known: set[str] | None = None
+        self._warned: set[str] = set()
+        self._last_flush = time.monotonic()
+        self._t0_stamp: dict | None = None
+        self._paths: dict[str, list[str]] = {"desired": [], "true": []}
+        self._path_last: dict[str, tuple[float, float] | None] = {"desired": None, "true": None}
+        self._path_kept_t: dict[str, float] = {"desired": -math.inf, "true": -math.inf}
+        self._path_sent_t = 0.0
+        self._path_dirty = False
+        self._last_ns = 0
+
+    # ---------------------------------------------------------------- channels
+
+    def _channel(self, topic: str, schema_name: str, schema: dict, metadata: dict | None = None) -> int:
+        if schema_name not in self._schemas:
+            self._schemas[schema_name] = self._writer.register_schema(
+                name=schema_name, encoding="jsonschema", data=json.dumps(schema).encode())
+        cid = self._writer.register_channel(topic=topic, message_encoding="json",
+                                            schema_id=self._schemas[schema_name], metadata=metadata or {})
+        self._channels[topic] = cid
+        return cid
+
+    def _start(self, ns: int, row: Mapping[str, Any]) -> None:
+        """First sample: signal layout, channels, static transforms and the robot scene."""
+        groups: dict[str, list[dict]] = {TOPIC_CONTROL: [], TOPIC_STATE: []}
+        for i, (name, value) in enumerate(row.items()):
+            entry = _layout_entry(name, value, i)
+            if entry is None:
+                warnings.warn(f"recorder: signal {name!r} is not numeric "
+                              f"({type(value).__name__}); it is not recorded", stacklevel=3)
+                self._warned.add(name)
+                continue
+            groups[TOPIC_STATE if name in STATE_SIGNALS else TOPIC_CONTROL].append(entry)
+        self._known = {e["name"] for g in groups.values() for e in g} | self._warned
+        info = {
+            TOPIC_CONTROL: ("uvms_mj.ControlSample", "Controller signals and commands, one per control sample"),
+            TOPIC_STATE: ("uvms_mj.TrueState", "True plant state, one per control sample"),
+        }
+        for topic, layout in groups.items():
+            if not layout:
+                continue
+            name, desc = info[topic]
+            cid = self._channel(topic, name, _sample_schema(name, desc, layout),
+                                {"uvms_mj.signals": json.dumps(layout)})
+            self._sample_channels.append(
+                (cid, [(e["name"], e["dtype"] == "bool", len(e["shape"]) > 1) for e in layout]))
+
+        stamp = _stamp(ns)
+        self._t0_stamp = stamp
+        self._has_q = "q_true" in row and np.shape(row["q_true"]) == (5,) and self.params is not None
+        if self._has_q:
+            self._channel(TOPIC_TF, "foxglove.FrameTransforms", SCHEMAS["foxglove.FrameTransforms"])
+            self._channel(TOPIC_JOINTS, "uvms_mj.JointStates", SCHEMAS["uvms_mj.JointStates"])
+            s45 = math.sqrt(0.5)
+            b = self.params.bodies
+            self._tf_chain = [
+                ("view", "world", (0.0, 0.0), {"x": s45, "y": 0.0, "z": 0.0, "w": s45}),
+                ("world", b[0].name, None, None),
+                (b[0].name, b[1].name, b[1].joint_offset, None),
+                (b[1].name, b[2].name, b[2].joint_offset, None),
+                (b[2].name, "tip", self.params.tip_offset, dict(_IDENTITY)),
+            ]
+            self._tf_tmpl = _tf_template(self._tf_chain)
+            self._js_tmpl = '{"timestamp":%s,"name":' + json.dumps(list(JOINT_NAMES)) + ',"position":%s,"velocity":%s}'
+        if self.params is not None:
+            self._writer.add_message(self._channel(TOPIC_SCENE, "foxglove.SceneUpdate",
+                                                   SCHEMAS["foxglove.SceneUpdate"]),
+                                     ns, _dumps(self._robot_scene(stamp)), ns, 0)
+        self._path_sent_t = ns * 1e-9
+        self._want_paths = self.params is not None and (
+            np.shape(row.get("p_desired", ())) == (5,) or np.shape(row.get("tip_true", ())) == (2,))
+        if self._want_paths:
+            self._channel(TOPIC_PATHS, "foxglove.SceneUpdate", SCHEMAS["foxglove.SceneUpdate"])
+
+    def _robot_scene(self, stamp: dict) -> dict:
+        colors = {"base": _color(0.85, 0.55, 0.15, 0.9)}
+        ents = []
+        for b in self.params.bodies:
+            cube = {"pose": {"position": {"x": b.box_center[0], "y": b.box_center[1], "z": 0.0},
+                             "orientation": dict(_IDENTITY)},
+                    "size": {"x": 2 * b.box_half[0], "y": 2 * b.box_half[1], "z": b.width},
+                    "color": colors.get(b.name, _color(0.6, 0.6, 0.65, 0.9))}
+            ents.append(_entity(b.name, b.name, stamp, cubes=[cube]))
+        arrows = []
+        for th in self.params.thrusters:
+            ang = math.atan2(th.direction[1], th.direction[0])
+            arrows.append({"pose": {"position": {"x": th.position[0], "y": th.position[1], "z": 0.0},
+                                    "orientation": _quat_z(ang)},
+                           "shaft_length": 0.12, "shaft_diameter": 0.015, "head_length": 0.04,
+                           "head_diameter": 0.035, "color": _color(0.2, 0.6, 1.0)})
+        if arrows:
+            ents.append(_entity(self.params.bodies[0].name, "thrusters", stamp, arrows=arrows))
+        tip = {"pose": {"position": dict(_ZERO3), "orientation": dict(_IDENTITY)},
+               "size": {"x": 0.025, "y": 0.025, "z": 0.025}, "color": _color(1.0, 0.2, 0.2)}
+        ents.append(_entity("tip", "tip", stamp, spheres=[tip]))
+        return {"deletions": [], "entities": ents}
+
+    # ---------------------------------------------------------------- writing
+
+    def write_sample(self, t: float, row: Mapping[str, Any]) -> None:
+        """Record one sample (the loop's ``sink``): ``row`` maps signal names to numbers,
+        booleans or numpy arrays."""
+        if self.closed:
+            raise RuntimeError(f"recorder for {self.path} is closed")
+        with _critical():
+            ns = _ns(t)
+            if self._known is None:
+                self._start(ns, row)
+            elif len(row) != len(self._known) or not self._known.issuperset(row):
+                for name in row.keys() - self._known - self._warned:
+                    self._warned.add(name)
+                    warnings.warn(f"recorder: signal {name!r} first appeared after the first "
+                                  "sample; it is not recorded", stacklevel=3)
+            k = self.samples
+            stamp = '{"sec":%d,"nsec":%d}' % divmod(ns, 1_000_000_000)
+            head = '{"timestamp":' + stamp + ',"t":' + repr(float(t))
+            w = self._writer
+            for cid, fields in self._sample_channels:
+                body = _enc({name: _encode(row[name], is_bool, flat)
+                             for name, is_bool, flat in fields if name in row})
+                w.add_message(cid, ns, (head + ("," + body[1:] if len(body) > 2 else "}")).encode(), ns, k)
+            if self._has_q and "q_true" in row:
+                q = np.asarray(row["q_true"], dtype=float).tolist()
+                half = (0.5 * q[2], 0.5 * q[3], 0.5 * q[4])
+                nums = _enc([q[0], q[1]] + [f(h) for h in half for f in (math.sin, math.cos)])[1:-1].split(",")
+                vals = {"stamp": stamp, "x": nums[0], "y": nums[1]}
+                for i in range(3):
+                    vals[f"z{i}"], vals[f"w{i}"] = nums[2 + 2 * i], nums[3 + 2 * i]
+                w.add_message(self._channels[TOPIC_TF], ns, (self._tf_tmpl % vals).encode(), ns, k)
+                qd = np.asarray(row["qd_true"], dtype=float).tolist() if "qd_true" in row else []
+                js = self._js_tmpl % (stamp, _enc(q), _enc(qd))
+                w.add_message(self._channels[TOPIC_JOINTS], ns, js.encode(), ns, k)
+            if self._want_paths:
+                self._add_path_points(t, row)
+                if t - self._path_sent_t >= self.path_period - 1e-9:
+                    self._write_paths(ns)
+            self.samples += 1
+            self._last_ns = ns
+            if time.monotonic() - self._last_flush >= self.flush_interval or k == 0:
+                self.flush()
+
+    def _add_path_points(self, t: float, row: Mapping[str, Any]) -> None:
+        for key, name, i in (("desired", "p_desired", 3), ("true", "tip_true", 0)):
+            v = row.get(name)
+            if v is None:
+                continue
+            x, y = float(v[i]), float(v[i + 1])
+            if not (math.isfinite(x) and math.isfinite(y)):
+                continue
+            if t - self._path_kept_t[key] >= self.path_resolution - 1e-9:
+                self._paths[key].append(_point(x, y))
+                self._path_kept_t[key] = t
+                self._path_last[key] = None
+            else:
+                self._path_last[key] = (x, y)
+            self._path_dirty = True
+
+    def _write_paths(self, ns: int) -> None:
+        stamp = _stamp(ns)
+        style = {"desired": (_color(0.1, 0.8, 0.2), "desired_tip_path"),
+                 "true": (_color(0.95, 0.2, 0.2), "true_tip_path")}
+        ents, pts = [], {}
+        for key, (color, eid) in style.items():
+            points = list(self._paths[key])
+            if self._path_last[key] is not None:
+                points.append(_point(*self._path_last[key]))
+            if len(points) < 2:
+                continue
+            line = {"type": 0, "pose": {"position": dict(_ZERO3), "orientation": dict(_IDENTITY)},
+                    "thickness": 0.004, "scale_invariant": False, "points": f"@@{key}@@", "color": color,
+                    "colors": [], "indices": []}
+            ents.append(_entity("world", eid, self._t0_stamp or stamp, frame_locked=False, lines=[line]))
+            pts[key] = "[" + ",".join(points) + "]"
+        self._path_sent_t = ns * 1e-9
+        self._path_dirty = False
+        if not ents:
+            return
+        data = _dumps({"deletions": [], "entities": ents}).decode()
+        for key, arr in pts.items():
+            data = data.replace(f'"@@{key}@@"', arr, 1)
+        self._writer.add_message(self._channels[TOPIC_PATHS], ns, data.encode(), ns, self.samples)
+
+    def flush(self) -> None:
+        """Finish the chunk in progress and flush the file (done automatically every
+        ``flush_interval`` s)."""
+        if self.closed:
+            return
+        with _critical():
+            self._writer.flush()
+            self._last_flush = time.monotonic()
+
+    def close(self, status: str = "ok", reason: str = "", meta: Mapping[str, Any] | None = None) -> None:
+        """Write the status record (with ``meta``, e.g. the RunResult's meta) and the summary,
+        and close the file. Later calls do nothing."""
+        if self.closed:
+            return
+        with _critical():
+            self.closed = True
+            self.status = status
+            try:
+                if self._want_paths_pending():
+                    self._write_paths(self._last_ns)
+                self._writer.flush()  # the last chunk goes before the status record
+                rec = {"status": status, "reason": reason, "samples": self.samples}
+                for key, value in dict(meta or {}).items():
+                    rec.setdefault(key, value)
+                self._writer.add_metadata(STATUS_NAME, {k: _meta_value(v) for k, v in rec.items()})
+                self._writer.finish()
+                self._file.flush()
+            finally:
+                self._file.close()
+
+    def _want_paths_pending(self) -> bool:
+        return bool(getattr(self, "_want_paths", False) and self._path_dirty)
+
+    def __enter__(self) -> "McapRecorder":
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        if exc_type is None:
+            self.close("ok")
+        elif issubclass(exc_type, KeyboardInterrupt):
+            self.close("interrupted", str(exc) or "interrupted (KeyboardInterrupt)")
+        else:
+            self.close("error", f"{exc_type.__name__}: {exc}")
+        return False
+
+
+# --------------------------------------------------------------------------- reading
+
+
+@dataclass
+class LogData(RunResult):
+    """A run read back from a log; usable wherever a :class:`RunResult` is.
+
+    Attributes (besides RunResult's ``t``, ``signals``, ``status``, ``reason``, ``meta``):
+        truncated: the file ends without its summary (the writer was killed); the data is
+            what was flushed before that.
+        path: the file read.
+    """
+
+    truncated: bool = False
+    path: str = ""
+
+    @property
+    def params(self) -> RobotParams | None:
+        """The recorded robot parameters (``meta["robot_params"]``), or None if absent."""
+        return _params_from_dict(self.meta.get("robot_params"))
+
+
+def _params_from_dict(d: Mapping[str, Any] | None) -> RobotParams | None:
+    if not d:
+        return None
+
+    def tup(v):
+        return tuple(tup(x) for x in v) if isinstance(v, list) else v
+
+    try:
+        return RobotParams(
+            bodies=tuple(BodyParams(**{k: tup(v) for k, v in b.items()}) for b in d["bodies"]),
+            thrusters=tuple(ThrusterParams(**{k: tup(v) for k, v in t.items()}) for t in d["thrusters"]),
+            **{k: tup(v) for k, v in d.items() if k not in ("bodies", "thrusters")},
+        )
+    except (KeyError, TypeError):
+        return None
+
+
+def _complete_prefix(data: bytes) -> tuple[int, bool]:
+    """Length of the longest prefix made of whole top-level records, and whether the file is
+    complete (footer and closing magic present)."""
+    if len(data) < len(_MAGIC) or data[: len(_MAGIC)] != _MAGIC:
+        raise McapError("not an MCAP file (bad magic)")
+    pos, n = len(_MAGIC), len(data)
+    while pos + 9 <= n:
+        op, length = struct.unpack_from("<BQ", data, pos)
+        end = pos + 9 + length
+        if end > n:
+            break
+        pos = end
+        if op == _OP_FOOTER:
+            return pos, data[pos: pos + len(_MAGIC)] == _MAGIC
+    return pos, False
+
+
+def _records(path: str | os.PathLike) -> tuple[list, bool]:
+    """All records of a log in file order (chunks broken up), and whether it was truncated.
+    Stops at the first incomplete or corrupt record."""
+    with open(path, "rb") as f:
+        data = f.read()
+    end, complete = _complete_prefix(data)
+    out: list = []
+    # A complete file keeps its closing magic (the stream reader checks it after the footer).
+    body = data[: end + len(_MAGIC)] if complete else data[:end]
+    reader = StreamReader(io.BytesIO(body), emit_chunks=True, validate_crcs=False)
+    try:
+        for rec in reader.records:
+            if isinstance(rec, Chunk):
+                try:
+                    out.extend(breakup_chunk(rec, validate_crc=True))
+                except Exception:
+                    complete = False
+                    break
+            else:
+                out.append(rec)
+    except Exception:
+        # McapError (EndOfFile at the cut) or a record that does not parse: keep what came before.
+        complete = False
+    return out, not complete
+
+
+def iter_messages(path: str | os.PathLike) -> Iterator[tuple[Channel, Schema | None, Message]]:
+    """(channel, schema, message) of every message in file order; works on truncated logs."""
+    recs, _ = _records(path)
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    for r in recs:
+        if isinstance(r, Schema):
+            schemas[r.id] = r
+        elif isinstance(r, Channel):
+            channels[r.id] = r
+        elif isinstance(r, Message) and r.channel_id in channels:
+            ch = channels[r.channel_id]
+            yield ch, schemas.get(ch.schema_id), r
+
+
+def _decode_meta(d: Mapping[str, str]) -> dict:
+    out = {}
+    for k, v in d.items():
+        try:
+            out[k] = json.loads(v)
+        except (ValueError, TypeError):
+            out[k] = v
+    return out
+
+
+def _scan(recs: list) -> dict:
+    """Metadata, channels and per-channel messages of a record list."""
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    msgs: dict[int, list[Message]] = {}
+    metas: dict[str, dict] = {}
+    for r in recs:
+        if isinstance(r, Message):
+            msgs.setdefault(r.channel_id, []).append(r)
+        elif isinstance(r, Channel):
+            channels.setdefault(r.id, r)
+        elif isinstance(r, Schema):
+            schemas.setdefault(r.id, r)
+        elif isinstance(r, Metadata):
+            metas.setdefault(r.name, _decode_meta(r.metadata))
+    return {"schemas": schemas, "channels": channels, "messages": msgs, "metadata": metas}
+
+
+def _sample_channels(scan: dict) -> list[tuple[Channel, list[dict]]]:
+    out = []
+    for ch in scan["channels"].values():
+        if ch.topic in SAMPLE_TOPICS and "uvms_mj.signals" in ch.metadata:
+            out.append((ch, json.loads(ch.metadata["uvms_mj.signals"])))
+    return out
+
+
+def _complete_sequences(scan: dict, sample_chs: list) -> list[int]:
+    if not sample_chs:
+        return []
+    seqs = None
+    for ch, _ in sample_chs:
+        s = {m.sequence for m in scan["messages"].get(ch.id, [])}
+        seqs = s if seqs is None else seqs & s
+    return sorted(seqs)
+
+
+def _status(scan: dict, truncated: bool, t_end: float | None) -> tuple[str, str, dict]:
+    st = dict(scan["metadata"].get(STATUS_NAME, {}))
+    if st:
+        return str(st.pop("status", "")), str(st.pop("reason", "")), st
+    if truncated:
+        where = f"t = {t_end:.4f} s" if t_end is not None else "the start"
+        return "truncated", f"log ends at {where} without a status record (writer killed?)", {}
+    return "unknown", "no status record", {}
+
+
+def read_log(path: str | os.PathLike) -> LogData:
+    """Read a log written by :class:`McapRecorder` (complete, or cut off by ``kill -9``).
+
+    Returns a :class:`LogData` with the sample times, the signals (the same names, order,
+    shapes and dtypes as the run's :class:`RunResult`; only samples whose every per-sample
+    message was flushed), the status and reason from the status record ("truncated" when it
+    is missing from a cut-off log) and ``meta``: the ``uvms_mj`` metadata (the caller's dict,
+    versions, git commit, robot parameters...), plus the keys of the status record's extra
+    ``meta`` (e.g. the RunResult's T, dt, seed, controller) that it does not already have,
+    plus ``T`` (inferred from the sample times if recorded nowhere).
+    """
+    recs, truncated = _records(path)
+    scan = _scan(recs)
+    sample_chs = _sample_channels(scan)
+    seqs = _complete_sequences(scan, sample_chs)
+    keep = set(seqs)
+    payloads: list[dict[int, dict]] = [dict() for _ in seqs]
+    pos = {s: i for i, s in enumerate(seqs)}
+    for ch, _ in sample_chs:
+        for m in scan["messages"].get(ch.id, []):
+            if m.sequence in keep:
+                payloads[pos[m.sequence]].setdefault(ch.id, json.loads(m.data))
+    order = sorted((e["index"], e["name"], e["dtype"], tuple(e["shape"]), ch.id)
+                   for ch, layout in sample_chs for e in layout)
+    rec: dict[str, list] = {}
+    times: list[float] = []
+    for p in payloads:
+        first = next(iter(p.values()))
+        times.append(float(first["t"]) if "t" in first else
+                     first["timestamp"]["sec"] + 1e-9 * first["timestamp"]["nsec"])
+        for _, name, _, _, cid in order:
+            msg = p[cid]
+            if name in msg:
+                rec.setdefault(name, []).append(msg[name])
+    signals: dict[str, np.ndarray] = {}
+    for _, name, dtype, shape, _ in order:
+        want = np.dtype(dtype)
+        if name not in rec:
+            signals[name] = np.zeros((0,) + shape, dtype=want)
+            continue
+        arr = np.asarray(rec[name])
+        if arr.dtype == object:  # null (NaN) among the values
+            arr = np.array(rec[name], dtype=float)
+        if len(shape) > 1 and arr.ndim == 2 and arr.shape[1] == int(np.prod(shape)):
+            arr = arr.reshape((len(arr),) + shape)
+        if want.kind == "b":
+            arr = arr.astype(bool)
+        elif want.kind == "f" and arr.dtype.kind == "f" and arr.dtype != want:
+            arr = arr.astype(want)
+        signals[name] = arr
+    t = np.asarray(times, dtype=float)
+    status, reason, extra = _status(scan, truncated, float(t[-1]) if len(t) else None)
+    meta = dict(scan["metadata"].get(METADATA_NAME, {}))
+    for key, value in extra.items():  # the creation-time metadata wins on a clash
+        meta.setdefault(key, value)
+    if "T" not in meta and len(t) > 1:
+        meta["T"] = float(np.median(np.diff(t)))
+    return LogData(t=t, signals=signals, status=status, reason=reason, meta=meta,
+                   truncated=truncated, path=str(path))
+
+
+def log_info(path: str | os.PathLike) -> dict:
+    """Summary of a log: metadata, status, truncation, channels (schema, encodings, message
+    counts), time range and number of complete samples. Works on truncated logs."""
+    recs, truncated = _records(path)
+    scan = _scan(recs)
+    sample_chs = _sample_channels(scan)
+    seqs = _complete_sequences(scan, sample_chs)
+    channels = []
+    t_min = t_max = None
+    for cid, ch in sorted(scan["channels"].items()):
+        ms = scan["messages"].get(cid, [])
+        sc = scan["schemas"].get(ch.schema_id)
+        channels.append({"topic": ch.topic, "schema": sc.name if sc else "",
+                         "schema_encoding": sc.encoding if sc else "",
+                         "message_encoding": ch.message_encoding, "messages": len(ms)})
+        if ms:
+            lo, hi = min(m.log_time for m in ms), max(m.log_time for m in ms)
+            t_min = lo if t_min is None else min(t_min, lo)
+            t_max = hi if t_max is None else max(t_max, hi)
+    sample_times = []
+    if sample_chs and seqs:
+        first = {m.sequence: m.log_time for m in scan["messages"].get(sample_chs[0][0].id, [])}
+        sample_times = [first[seqs[0]] * 1e-9, first[seqs[-1]] * 1e-9]
+    status, reason, extra = _status(scan, truncated, sample_times[-1] if sample_times else None)
+    start = t_min * 1e-9 if t_min is not None else None
+    end = t_max * 1e-9 if t_max is not None else None
+    return {
+        "path": str(path),
+        "size_bytes": os.path.getsize(path),
+        "truncated": truncated,
+        "status": status,
+        "reason": reason,
+        "metadata": scan["metadata"].get(METADATA_NAME, {}),
+        "status_record": scan["metadata"].get(STATUS_NAME, {}),
+        "channels": channels,
+        "start_time": start,
+        "end_time": end,
+        "duration": (end - start) if start is not None else 0.0,
+        "samples": len(seqs),
+        "signals": {e["name"]: {"dtype": e["dtype"], "shape": e["shape"], "topic": ch.topic}
+                    for ch, layout in sample_chs for e in sorted(layout, key=lambda e: e["index"])},
+    }
+
+
+def format_info(info: Mapping[str, Any]) -> str:
+    """Human-readable text of :func:`log_info`'s result."""
+    def fmt_t(x):
+        return "-" if x is None else f"{x:.4f} s"
+
+    lines = [f"log:       {info['path']} ({info['size_bytes'] / 1024:.1f} KiB)"]
+    state = "TRUNCATED (read up to the last flush)" if info["truncated"] else "complete"
+    lines.append(f"file:      {state}")
+    lines.append(f"status:    {info['status']}" + (f" ({info['reason']})" if info.get("reason") else ""))
+    lines.append(f"time:      {fmt_t(info['start_time'])} .. {fmt_t(info['end_time'])} "
+                 f"(duration {info['duration']:.4f} s, {info['samples']} samples)")
+    meta = dict(info.get("metadata", {}))
+    versions = meta.pop("versions", None)
+    meta.pop("robot_params", None)
+    if versions:
+        lines.append("versions:  " + ", ".join(f"{k} {v}" for k, v in versions.items()))
+    if "git_commit" in meta:
+        dirty = " (dirty)" if meta.pop("git_dirty", False) else ""
+        lines.append(f"git:       {meta.pop('git_commit')}{dirty}")
+    if meta:
+        lines.append("metadata:")
+        for k, v in meta.items():
+            text = json.dumps(v, sort_keys=True, default=str)
+            lines.append(f"  {k}: {text if len(text) <= 100 else text[:97] + '...'}")
+    extra = {k: v for k, v in info.get("status_record", {}).items() if k not in ("status", "reason")}
+    if extra:
+        lines.append("run:       " + ", ".join(f"{k}={v}" for k, v in extra.items()))
+    lines.append("channels:")
+    width = max((len(c["topic"]) for c in info["channels"]), default=5)
+    for c in info["channels"]:
+        lines.append(f"  {c['topic']:<{width}}  {c['messages']:>7} msgs  {c['schema']} "
+                     f"({c['message_encoding']}/{c['schema_encoding']})")
+    if info.get("signals"):
+        lines.append("signals:   " + ", ".join(
+            f"{n}{tuple(s['shape']) if s['shape'] else ''}" for n, s in info["signals"].items()))
+    return "\n".join(lines)
