@@ -6,8 +6,13 @@ underwater robot with 2 link manipulator": a floating base with 3 thrusters carr
 
     >>> from uvms_mj import Plant
     >>> plant = Plant()          # default robot, all hydrodynamics on
-    >>> plant.step(600)          # 1 s at the default 1/600 s step
+    >>> plant.step(120)          # 1 s at the default 1/120 s step (RK4)
 """
+
+# Choose a headless OpenGL backend (MUJOCO_GL) before anything imports mujoco; see render.py.
+from .render import configure_gl as _configure_gl
+
+_configure_gl()
 
 from .kinematics import ArmGeometry
 from .hydro import HydroModel, HydroTerms, strip_integrals

@@ -1,15 +1,18 @@
 """The ``uvms-mj`` command line.
 
-* ``paper``: the paper's experiment (Section 4) with and without the disturbance observer, and a
-  metrics table;
-* ``drift``: the plant left to itself from the paper's initial pose, its state every second.
+Commands: ``run``, ``compare``, ``render``, ``plot``, ``validate``, ``info`` (scenario files
+and logs), ``paper`` (the paper's experiment without a scenario file) and ``drift`` (the plant
+left to itself).
 
-Scenario files, logs, video and plots come with the testbed issue.
+Exit codes: 0 success; 1 unexpected error; 2 bad input (usage, scenario, parameters);
+3 a run diverged (the log is still written, with the reason); 4 rendering unavailable
+(missing GL libraries); 130 interrupted (Ctrl-C or SIGTERM; the log is closed cleanly).
 """
 
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 import click
 import numpy as np
@@ -19,11 +22,288 @@ from .hydro import HydroTerms
 from .params import ParameterError
 from .plant import DivergenceError, Plant
 
+EXIT_DIVERGED = 3
+EXIT_RENDER = 4
+EXIT_INTERRUPTED = 130
+
+METRIC_LABELS = {
+    "base_pos_rms_mm": "base position RMS [mm]",
+    "base_pos_max_mm": "base position max [mm]",
+    "base_att_rms_mrad": "base attitude RMS [mrad]",
+    "base_att_max_mrad": "base attitude max [mrad]",
+    "tip_rms_mm": "end tip RMS [mm]",
+    "tip_max_mm": "end tip max [mm]",
+    "thrust_rms_N": "thrust RMS [N]",
+    "torque_rms_Nm": "joint torque RMS [N m]",
+    "saturated_s": "thrusters saturated [s]",
+}
+
+
+def metrics_table(results: dict[str, dict[str, float]]) -> str:
+    """Side-by-side metrics; with two columns, the ratio second / first."""
+    names = list(results)
+    ratio = len(names) == 2
+    lines = [f"{'metric':<28}" + "".join(f"{n:>12}" for n in names) + (f"{'ratio':>9}" if ratio else "")]
+    for key, label in METRIC_LABELS.items():
+        vals = [results[n].get(key, float("nan")) for n in names]
+        line = f"{label:<28}" + "".join(f"{v:>12.4g}" for v in vals)
+        if ratio:
+            line += f"{(vals[1] / vals[0]) if vals[0] else float('nan'):>9.2f}"
+        lines.append(line)
+    return "\n".join(lines)
+
 
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="uvms-mj")
 def main() -> None:
-    """uvms-mj: a MuJoCo testbed for underwater vehicle-manipulator systems."""
+    """uvms-mj: a MuJoCo testbed for underwater vehicle-manipulator systems.
+
+    Run scenario files (scenarios/*.yaml) into Foxglove-ready MCAP logs, metrics tables, plots
+    and videos; compare controllers; inspect logs.
+    """
+
+
+# ------------------------------------------------------------------ scenario runs
+
+
+def _load(path: str, sets: tuple[str, ...]):
+    from .scenario import ScenarioError, load_scenario
+
+    try:
+        return load_scenario(path, sets)
+    except ScenarioError as exc:
+        raise click.UsageError(str(exc)) from None
+
+
+def _run_one(scenario, out: Path, progress: bool = True):
+    """Run one scenario into an MCAP log; returns (result, log path, metrics)."""
+    from .experiment import metrics
+    from .recorder import McapRecorder, handle_sigterm
+    from .scenario import ScenarioError, build, resolved, run_scenario
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    try:
+        plant, _ = build(scenario)
+    except (ScenarioError, ParameterError, ValueError) as exc:
+        raise click.UsageError(str(exc)) from None
+    meta = {"scenario": resolved(scenario), "seed": scenario.seed}
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=int(scenario.duration * 60) + 1, desc=f"{scenario.name} [{scenario.controller.name}]",
+                   unit="sample", leave=False, disable=None)
+
+    def tick(k: int, n: int) -> None:
+        if bar is not None:
+            bar.total = n
+            bar.update(1)
+
+    with handle_sigterm(), McapRecorder(out, plant.params, meta) as rec:
+        try:
+            res = run_scenario(scenario, sink=rec.write_sample, on_sample=tick)
+        except KeyboardInterrupt:
+            rec.close(status="interrupted", reason="interrupted (Ctrl-C or SIGTERM)")
+            if bar is not None:
+                bar.close()
+            click.echo(f"interrupted; partial log closed cleanly: {out}", err=True)
+            sys.exit(EXIT_INTERRUPTED)
+        rec.close(status=res.status, reason=res.reason)
+    if bar is not None:
+        bar.close()
+    return res, out, metrics(res)
+
+
+def _default_log(scenario, out: str | None, controller: str) -> Path:
+    if out:
+        return Path(out)
+    if scenario.outputs.log:
+        return Path(scenario.outputs.log)
+    return Path("logs") / f"{scenario.name}-{controller}.mcap"
+
+
+def _video(log_path: Path, video_path: Path, scenario=None) -> None:
+    from .recorder import read_log
+    from .render import RenderError, render_video
+
+    log = read_log(log_path)
+    kw = {}
+    if scenario is not None:
+        kw = {"fps": scenario.outputs.video_fps, "size": tuple(scenario.outputs.video_size)}
+    try:
+        info = render_video(log, video_path, **kw)
+    except RenderError as exc:
+        click.echo(f"error: {exc}", err=True)
+        sys.exit(EXIT_RENDER)
+    click.echo(f"video: {video_path} ({info['frames']} frames)")
+
+
+@main.command()
+@click.argument("scenario", type=click.Path(exists=True, dir_okay=False))
+@click.option("--set", "sets", multiple=True, metavar="KEY.PATH=VALUE",
+              help="Override a scenario field, e.g. --set controller.name=rac --set plant.current=[0.1,0]")
+@click.option("--out", type=click.Path(dir_okay=False), default=None,
+              help="Log path (default: the scenario's outputs.log or logs/<name>-<controller>.mcap).")
+@click.option("--video/--no-video", default=None, help="Render an MP4 next to the log (default: outputs.video).")
+@click.option("--plots/--no-plots", default=None, help="Write PNG plots next to the log (default: outputs.plots).")
+def run(scenario: str, sets: tuple[str, ...], out: str | None, video: bool | None, plots: bool | None) -> None:
+    """Run SCENARIO, write its MCAP log and print a metrics table.
+
+    Exits with 3 if the run diverged (the log is kept, with the reason)."""
+    sc = _load(scenario, sets)
+    log = _default_log(sc, out, sc.controller.name)
+    res, log, m = _run_one(sc, log)
+    click.echo(f"log: {log}")
+    click.echo(metrics_table({sc.controller.name: m}))
+    if plots if plots is not None else sc.outputs.plots:
+        from .plots import plot_run
+        from .recorder import read_log
+
+        for p in plot_run(read_log(log), log.parent, stem=log.stem):
+            click.echo(f"plot: {p}")
+    if video if video is not None else sc.outputs.video:
+        _video(log, log.with_suffix(".mp4"), sc)
+    if res.status != "ok":
+        click.echo(f"error: {res.reason}", err=True)
+        sys.exit(EXIT_DIVERGED)
+
+
+@main.command()
+@click.argument("scenario", type=click.Path(exists=True, dir_okay=False))
+@click.option("--controllers", default="rac,rac_dob", show_default=True, help="Comma-separated controller names.")
+@click.option("--set", "sets", multiple=True, metavar="KEY.PATH=VALUE", help="Override a scenario field.")
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default="logs", show_default=True,
+              help="Folder for the logs and the comparison figure.")
+@click.option("--video/--no-video", default=False, show_default=True, help="Render a video of each run.")
+def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str, video: bool) -> None:
+    """Run SCENARIO with each controller; print a side-by-side table with ratios, write the logs
+    and one comparison figure (PNG)."""
+    from .controllers import available
+    from .plots import plot_comparison
+    from .recorder import read_log
+
+    names = [c.strip() for c in controllers.split(",") if c.strip()]
+    unknown = [c for c in names if c not in available()]
+    if unknown or not names:
+        raise click.BadParameter(f"unknown controller(s) {', '.join(unknown) or '(none given)'}; "
+                                 f"registered: {', '.join(available())}", param_hint="--controllers")
+    results, logs, failed = {}, {}, []
+    base = _load(scenario, sets)
+    for name in names:
+        sc = _load(scenario, tuple(sets) + (f"controller.name={name}",))
+        path = Path(out_dir) / f"{sc.name}-{name}.mcap"
+        res, path, m = _run_one(sc, path)
+        results[name], logs[name] = m, path
+        click.echo(f"log: {path}")
+        if res.status != "ok":
+            failed.append(f"{name}: {res.reason}")
+        if video:
+            _video(path, path.with_suffix(".mp4"), sc)
+    click.echo(metrics_table(results))
+    fig = plot_comparison({n: read_log(p) for n, p in logs.items()}, Path(out_dir) / f"{base.name}-compare.png")
+    click.echo(f"figure: {fig}")
+    if failed:
+        click.echo("error: " + "; ".join(failed), err=True)
+        sys.exit(EXIT_DIVERGED)
+
+
+@main.command()
+@click.argument("log", type=click.Path(exists=True, dir_okay=False))
+@click.option("-o", "--output", type=click.Path(dir_okay=False), default=None, help="MP4 path (default: LOG.mp4).")
+@click.option("--fps", type=click.IntRange(1, 120), default=30, show_default=True)
+@click.option("--size", type=(int, int), default=(640, 480), show_default=True, help="Width and height [px].")
+def render(log: str, output: str | None, fps: int, size: tuple[int, int]) -> None:
+    """Replay LOG's states in MuJoCo and render an MP4 off-screen (no re-simulation)."""
+    from .recorder import read_log
+    from .render import RenderError, render_video
+
+    out = Path(output) if output else Path(log).with_suffix(".mp4")
+    try:
+        info = render_video(read_log(log), out, fps=fps, size=size)
+    except RenderError as exc:
+        click.echo(f"error: {exc}", err=True)
+        sys.exit(EXIT_RENDER)
+    click.echo(f"video: {out} ({info['frames']} frames)")
+
+
+@main.command()
+@click.argument("log", type=click.Path(exists=True, dir_okay=False))
+@click.option("-o", "--out-dir", type=click.Path(file_okay=False), default=None, help="Folder (default: LOG's).")
+def plot(log: str, out_dir: str | None) -> None:
+    """Paper-style time histories (Figs. 5 and 6) and control signals of LOG, as PNG."""
+    from .plots import plot_run
+    from .recorder import read_log
+
+    folder = Path(out_dir) if out_dir else Path(log).parent
+    folder.mkdir(parents=True, exist_ok=True)
+    for p in plot_run(read_log(log), folder, stem=Path(log).stem):
+        click.echo(f"plot: {p}")
+
+
+@main.command()
+@click.argument("scenario", type=click.Path(exists=True, dir_okay=False))
+@click.option("--set", "sets", multiple=True, metavar="KEY.PATH=VALUE", help="Override a scenario field.")
+def validate(scenario: str, sets: tuple[str, ...]) -> None:
+    """Check SCENARIO (schema, values, controller, parameters) without running it."""
+    from .scenario import ScenarioError, build
+
+    sc = _load(scenario, sets)
+    try:
+        build(sc)
+    except (ScenarioError, ParameterError, ValueError) as exc:
+        raise click.UsageError(str(exc)) from None
+    click.echo(f"{scenario}: ok ({sc.name}, controller {sc.controller.name}, {sc.duration:g} s)")
+
+
+@main.command()
+@click.argument("log", type=click.Path(exists=True, dir_okay=False))
+def info(log: str) -> None:
+    """Metadata, channels and message counts of LOG (and whether it is truncated)."""
+    from .recorder import format_info, log_info
+
+    click.echo(format_info(log_info(log)))
+
+
+# ------------------------------------------------------------------ without scenario files
+
+
+@main.command()
+@click.option("--controllers", default="rac,rac_dob", show_default=True,
+              help="Comma-separated controller names to run (registered: see --list).")
+@click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=40.0, show_default=True,
+              help="Simulated time [s].")
+@click.option("--thruster-lag", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Plant thruster time constant [s] (default: the model's 0.02 s).")
+@click.option("--ideal", is_flag=True, help="Plant identical to the nominal model (no modelling error).")
+@click.option("--list", "list_only", is_flag=True, help="List the registered controllers and exit.")
+def paper(controllers: str, duration: float, thruster_lag: float | None, ideal: bool, list_only: bool) -> None:
+    """Run the paper's experiment with each controller and print RMS / max errors side by side
+    (no log; see `compare scenarios/paper.yaml` for logs, figures and videos)."""
+    from .controllers import ControllerError, available
+    from .experiment import PaperExperiment, metrics
+
+    if list_only:
+        click.echo("\n".join(available()))
+        return
+    names = [c.strip() for c in controllers.split(",") if c.strip()]
+    unknown = [c for c in names if c not in available()]
+    if unknown:
+        raise click.BadParameter(f"unknown controller(s) {', '.join(unknown)}; registered: {', '.join(available())}",
+                                 param_hint="--controllers")
+    over = {} if thruster_lag is None else {"thrusters.tau": thruster_lag}
+    results = {}
+    status = 0
+    for name in names:
+        try:
+            res = PaperExperiment(controller=name, duration=duration, truth=not ideal, plant_overrides=over).run()
+        except (ControllerError, ParameterError, ValueError) as exc:
+            raise click.UsageError(str(exc)) from None
+        if res.status != "ok":
+            click.echo(f"{name}: {res.reason}", err=True)
+            status = EXIT_DIVERGED
+        results[name] = metrics(res)
+    click.echo(metrics_table(results))
+    sys.exit(status)
 
 
 @main.command()
@@ -64,59 +344,8 @@ def drift(seconds: float, current: tuple[float, float], drag: str, overrides: tu
                        f" {tip[0]:8.4f} {tip[1]:8.4f} {plant.energy().total:9.3f}")
     except DivergenceError as exc:
         click.echo(f"error: {exc}", err=True)
-        sys.exit(3)
+        sys.exit(EXIT_DIVERGED)
 
 
 if __name__ == "__main__":
     main()
-
-
-@main.command()
-@click.option("--controllers", default="rac,rac_dob", show_default=True,
-              help="Comma-separated controller names to run (registered: see --list).")
-@click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=40.0, show_default=True,
-              help="Simulated time [s].")
-@click.option("--thruster-lag", type=click.FloatRange(min=0, min_open=True), default=None,
-              help="Plant thruster time constant [s] (default: the model's 0.02 s).")
-@click.option("--ideal", is_flag=True, help="Plant identical to the nominal model (no modelling error).")
-@click.option("--list", "list_only", is_flag=True, help="List the registered controllers and exit.")
-def paper(controllers: str, duration: float, thruster_lag: float | None, ideal: bool, list_only: bool) -> None:
-    """Run the paper's experiment with each controller and print RMS / max errors side by side."""
-    from .controllers import ControllerError, available
-    from .experiment import PaperExperiment, metrics
-
-    if list_only:
-        click.echo("\n".join(available()))
-        return
-    names = [c.strip() for c in controllers.split(",") if c.strip()]
-    unknown = [c for c in names if c not in available()]
-    if unknown:
-        raise click.BadParameter(f"unknown controller(s) {', '.join(unknown)}; registered: {', '.join(available())}",
-                                 param_hint="--controllers")
-    over = {} if thruster_lag is None else {"thrusters.tau": thruster_lag}
-    results = {}
-    status = 0
-    for name in names:
-        try:
-            res = PaperExperiment(controller=name, duration=duration, truth=not ideal, plant_overrides=over).run()
-        except (ControllerError, ParameterError, ValueError) as exc:
-            raise click.UsageError(str(exc)) from None
-        if res.status != "ok":
-            click.echo(f"{name}: {res.reason}", err=True)
-            status = 3
-        results[name] = metrics(res)
-    labels = {
-        "base_pos_rms_mm": "base position RMS [mm]", "base_pos_max_mm": "base position max [mm]",
-        "base_att_rms_mrad": "base attitude RMS [mrad]", "base_att_max_mrad": "base attitude max [mrad]",
-        "tip_rms_mm": "end tip RMS [mm]", "tip_max_mm": "end tip max [mm]", "thrust_rms_N": "thrust RMS [N]",
-        "torque_rms_Nm": "joint torque RMS [N m]", "saturated_s": "thrusters saturated [s]",
-    }
-    ratio = len(names) == 2
-    click.echo(f"{'metric':<28}" + "".join(f"{n:>12}" for n in names) + (f"{'ratio':>9}" if ratio else ""))
-    for key, label in labels.items():
-        vals = [results[n][key] for n in names]
-        line = f"{label:<28}" + "".join(f"{v:>12.4g}" for v in vals)
-        if ratio:
-            line += f"{(vals[1] / vals[0] if vals[0] else float('nan')):>9.2f}"
-        click.echo(line)
-    sys.exit(status)

@@ -1,0 +1,627 @@
+"""Off-screen video of a logged run (no simulation: the log's true state is replayed).
+
+:func:`render_video` interpolates ``q_true`` to the video frame times, sets it as ``qpos`` of a
+plain ``MjData`` of the scene model (``models/scene.xml``), runs ``mj_kinematics`` (with
+``mj_comPos`` and ``mj_camlight`` for the cameras) and renders
+with ``mujoco.Renderer``; the desired end-tip path (``p_desired[:, 3:5]``) and the tip's trace so
+far (``tip_true``) are drawn as user geoms, a small clock in the top-left corner, and the frames
+are piped to the ffmpeg that ships with imageio-ffmpeg (H.264, yuv420p, MP4).
+
+Headless OpenGL
+---------------
+MuJoCo picks its OpenGL backend from ``$MUJOCO_GL`` once, when ``mujoco`` is first imported, and
+``import mujoco`` itself fails when that backend's library is missing. ``uvms_mj/__init__.py``
+therefore calls :func:`configure_gl` before anything imports mujoco:
+
+* ``MUJOCO_GL`` unset (Linux): ``egl`` if ``libEGL.so.1`` and ``libOpenGL.so.0`` (or ``libGL``)
+  load, else ``osmesa`` if ``libOSMesa`` loads, else left unset (MuJoCo's GLFW default);
+* ``MUJOCO_GL`` set to a value MuJoCo rejects, or to ``egl``/``osmesa`` whose library cannot be
+  loaded: mujoco is imported with rendering disabled (so simulation keeps working), the user's
+  value is put back, and the problem is remembered.
+
+Every rendering problem (the remembered one, no backend library, a GL context that cannot be
+created) surfaces as a :class:`RenderError` whose message is one line naming the Debian packages
+to install. On Linux without a display, a MuJoCo that was imported before ``uvms_mj`` with the
+GLFW default is switched to EGL/OSMesa for the renderer's context.
+
+Debian packages: ``libegl1 libegl-mesa0 libgl1-mesa-dri libopengl0`` (EGL, Mesa's llvmpipe
+software rasterizer when there is no GPU) or ``libosmesa6`` (``MUJOCO_GL=osmesa``).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import math
+import os
+import platform
+import sys
+import time
+from pathlib import Path
+from typing import Any, Callable, Iterator
+
+import numpy as np
+
+__all__ = ["RenderError", "DEBIAN_PACKAGES", "configure_gl", "gl_status", "render_frames", "render_video"]
+
+#: Debian/Ubuntu packages that provide each headless backend.
+DEBIAN_PACKAGES: dict[str, tuple[str, ...]] = {
+    "egl": ("libegl1", "libegl-mesa0", "libgl1-mesa-dri", "libopengl0"),
+    "osmesa": ("libosmesa6",),
+}
+#: Shared libraries each backend needs: every group must have one loadable member.
+_BACKEND_LIBS: dict[str, tuple[tuple[str, ...], ...]] = {
+    "egl": (("libEGL.so.1",), ("libOpenGL.so.0", "libGL.so.1")),
+    "osmesa": (("libOSMesa.so.8", "libOSMesa.so.6"),),
+}
+_MUJOCO_GL_VALID = ("", "enable", "enabled", "on", "true", "1", "glfw", "glx", "egl", "osmesa")
+_MUJOCO_GL_OFF = ("disable", "disabled", "off", "false", "0")
+
+# What configure_gl decided: backend chosen automatically (or None) and a deferred problem.
+_GL_STATE: dict[str, Any] = {"auto": None, "problem": None}
+
+
+class RenderError(RuntimeError):
+    """Rendering is impossible here (no OpenGL backend, or no GL context); a one-line message."""
+
+
+def _install_hint() -> str:
+    egl, osm = " ".join(DEBIAN_PACKAGES["egl"]), " ".join(DEBIAN_PACKAGES["osmesa"])
+    return f"install the Debian packages: apt-get install {egl} (MUJOCO_GL=egl), or {osm} (MUJOCO_GL=osmesa)"
+
+
+_LOADABLE: dict[str, bool] = {}
+
+
+def _loadable(soname: str) -> bool:
+    if soname not in _LOADABLE:
+        try:
+            ctypes.CDLL(soname)
+            _LOADABLE[soname] = True
+        except OSError:
+            _LOADABLE[soname] = False
+    return _LOADABLE[soname]
+
+
+def _missing_libs(backend: str) -> list[str]:
+    """Library groups of ``backend`` with no loadable member (as 'a or b' strings)."""
+    return [" or ".join(group) for group in _BACKEND_LIBS.get(backend, ()) if not any(map(_loadable, group))]
+
+
+def _headless() -> bool:
+    return not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def configure_gl() -> None:
+    """Choose ``MUJOCO_GL`` before mujoco is imported (called by ``uvms_mj/__init__``).
+
+    Never raises: a backend that cannot work is remembered and reported by the renderer as a
+    :class:`RenderError`, so that ``import uvms_mj`` and simulation work without any GL library.
+    """
+    if "mujoco" in sys.modules or platform.system() != "Linux":
+        return  # too late to choose, or not our business (macOS: CGL, Windows: WGL)
+    raw = os.environ.get("MUJOCO_GL")
+    value = (raw or "").strip().lower()
+    if not value:
+        for backend in ("egl", "osmesa"):
+            if not _missing_libs(backend):
+                os.environ["MUJOCO_GL"] = backend
+                _GL_STATE["auto"] = backend
+                return
+        return  # nothing headless: leave MuJoCo's GLFW default (fine with a display)
+    if value in _MUJOCO_GL_OFF:
+        _GL_STATE["problem"] = f"rendering is disabled by MUJOCO_GL={raw}: unset it (or set MUJOCO_GL=egl)"
+        return
+    if value not in _MUJOCO_GL_VALID:
+        problem = (f"MUJOCO_GL={raw!r} is not a valid OpenGL backend: use MUJOCO_GL=egl (or osmesa) to render "
+                   f"without a display, glfw with one")
+    else:
+        missing = _missing_libs(value)
+        if not missing:
+            return
+        problem = f"MUJOCO_GL={raw} but {', '.join(missing)} cannot be loaded: {_install_hint()}"
+    # `import mujoco` would fail outright with this value: import it without rendering, then
+    # put the user's value back (for child processes) and remember the problem.
+    _GL_STATE["problem"] = problem
+    os.environ["MUJOCO_GL"] = "disable"
+    try:
+        import mujoco  # noqa: F401
+    finally:
+        os.environ["MUJOCO_GL"] = raw  # type: ignore[assignment]
+
+
+def gl_status() -> dict[str, Any]:
+    """The OpenGL backend in use: {'backend', 'auto' (chosen by configure_gl), 'problem'}."""
+    try:
+        from mujoco.rendering.classic import gl_context
+
+        cls = getattr(gl_context, "GLContext", None)
+        backend = None if cls is None else cls.__module__.rsplit(".", 1)[-1]
+    except ImportError:
+        backend = None
+    return {"backend": backend, "auto": _GL_STATE["auto"], "problem": _GL_STATE["problem"]}
+
+
+def _first_line(exc: BaseException) -> str:
+    try:
+        text = str(exc).strip()
+    except Exception:  # noqa: BLE001 (PyOpenGL's EGLError can fail to format itself)
+        text = ""
+    line = text.splitlines()[0] if text else ""
+    return f"{type(exc).__name__}: {line[:200]}" if line else type(exc).__name__
+
+
+def _headless_context_class():
+    """EGL or OSMesa GLContext class for a MuJoCo imported with the GLFW default, or RenderError."""
+    errors = []
+    for backend in ("egl", "osmesa"):
+        missing = _missing_libs(backend)
+        if missing:
+            errors.append(f"{backend}: no {missing[0]}")
+            continue
+        try:
+            if backend == "egl":
+                from mujoco.egl import GLContext
+            else:
+                from mujoco.osmesa import GLContext
+            return GLContext
+        except Exception as exc:  # noqa: BLE001
+            errors.append(f"{backend}: {_first_line(exc)}")
+    raise RenderError(f"no OpenGL backend for rendering without a display ({'; '.join(errors)}): {_install_hint()}")
+
+
+def _make_renderer(model, height: int, width: int):
+    """mujoco.Renderer, with every GL failure turned into a one-line RenderError."""
+    if _GL_STATE["problem"]:
+        raise RenderError(_GL_STATE["problem"])
+    import mujoco
+
+    try:
+        from mujoco.rendering.classic import gl_context
+    except ImportError as exc:
+        raise RenderError(f"this MuJoCo has no off-screen renderer ({_first_line(exc)})") from None
+    current = getattr(gl_context, "GLContext", None)
+    if current is None or not hasattr(mujoco, "Renderer"):
+        gl = os.environ.get("MUJOCO_GL", "")
+        raise RenderError(f"MuJoCo was imported with rendering disabled (MUJOCO_GL={gl!r}): "
+                          f"set MUJOCO_GL=egl before importing mujoco; {_install_hint()}")
+    use = current
+    if platform.system() == "Linux" and current.__module__ == "mujoco.glfw" and _headless():
+        use = _headless_context_class()  # mujoco was imported before uvms_mj, MUJOCO_GL unset
+    backend = use.__module__.rsplit(".", 1)[-1]
+    try:
+        gl_context.GLContext = use
+        try:
+            return mujoco.Renderer(model, height=height, width=width)
+        finally:
+            gl_context.GLContext = current
+    except Exception as exc:  # noqa: BLE001 (EGL/OSMesa/GLFW raise anything from ImportError to GLError)
+        raise RenderError(f"cannot create an OpenGL context with MUJOCO_GL={backend} ({_first_line(exc)}): "
+                          f"{_install_hint()}") from None
+
+
+# ------------------------------------------------------------------ log access
+
+
+def _signal(log, name: str) -> np.ndarray | None:
+    sig = log.signals
+    try:
+        if name not in sig:
+            return None
+        return np.asarray(sig[name], dtype=float)
+    except (KeyError, TypeError):
+        return None
+
+
+def _interp(t: np.ndarray, ts: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """x (N, k) sampled at ts, linearly interpolated at times t (M,) -> (M, k)."""
+    return np.stack([np.interp(t, ts, x[:, j]) for j in range(x.shape[1])], axis=1)
+
+
+def _decimate(n: int, max_points: int) -> int:
+    return max(1, math.ceil(n / max_points))
+
+
+def _thin(idx: np.ndarray, max_points: int) -> np.ndarray:
+    """Every k-th index so that at most ~max_points remain, the last one kept."""
+    if len(idx) <= max_points:
+        return idx
+    out = idx[:: _decimate(len(idx), max_points)]
+    return out if out[-1] == idx[-1] else np.r_[out, idx[-1]]
+
+
+def _simplify(points: np.ndarray, tol: float) -> np.ndarray:
+    """Indices of a Ramer-Douglas-Peucker simplification of a polyline (N, 2) to within ``tol``
+    (sorted, first and last included): a straight path needs 2 points, not thousands of line
+    geoms, each of which costs a draw call in the software rasterizer."""
+    n = len(points)
+    if n <= 2:
+        return np.arange(n)
+    keep = np.zeros(n, dtype=bool)
+    keep[[0, n - 1]] = True
+    stack = [(0, n - 1)]
+    while stack:
+        i, j = stack.pop()
+        if j - i < 2:
+            continue
+        a, b = points[i], points[j]
+        rel = points[i + 1:j] - a
+        ab = b - a
+        # distance to the segment (not the line: a path may double back along itself)
+        s = np.clip(rel @ ab / max(float(ab @ ab), 1e-300), 0.0, 1.0)
+        dist = np.hypot(rel[:, 0] - s * ab[0], rel[:, 1] - s * ab[1])
+        k = int(np.argmax(dist))
+        if dist[k] > tol:
+            m = i + 1 + k
+            keep[m] = True
+            stack += [(i, m), (m, j)]
+    return np.flatnonzero(keep)
+
+
+# ------------------------------------------------------------------ clock overlay (5x7 bitmap font)
+
+_FONT = {
+    "0": "01110 10001 10011 10101 11001 10001 01110", "1": "00100 01100 00100 00100 00100 00100 01110",
+    "2": "01110 10001 00001 00010 00100 01000 11111", "3": "11110 00001 00001 01110 00001 00001 11110",
+    "4": "00010 00110 01010 10010 11111 00010 00010", "5": "11111 10000 11110 00001 00001 10001 01110",
+    "6": "00110 01000 10000 11110 10001 10001 01110", "7": "11111 00001 00010 00100 01000 01000 01000",
+    "8": "01110 10001 10001 01110 10001 10001 01110", "9": "01110 10001 10001 01111 00001 00010 01100",
+    ".": "00000 00000 00000 00000 00000 01100 01100", "-": "00000 00000 00000 11111 00000 00000 00000",
+    "=": "00000 00000 11111 00000 11111 00000 00000", " ": "00000 00000 00000 00000 00000 00000 00000",
+    "t": "01000 01000 11100 01000 01000 01001 00110", "s": "00000 00000 01111 10000 01110 00001 11110",
+    "x": "00000 00000 10001 01010 00100 01010 10001",
+}
+_GLYPHS = {c: np.array([[ch == "1" for ch in row] for row in rows.split()], dtype=bool) for c, rows in _FONT.items()}
+
+
+def _stamp_text(img: np.ndarray, text: str, x: int = 8, y: int = 8, scale: int = 2) -> None:
+    """Draw ``text`` (digits, '.', '-', '=', ' ', 't', 's', 'x') in white on a dark box, in place."""
+    glyphs = [_GLYPHS[c] for c in text if c in _GLYPHS]
+    if not glyphs:
+        return
+    mask = np.concatenate([np.pad(g, ((0, 0), (0, 1))) for g in glyphs], axis=1)
+    mask = np.kron(mask, np.ones((scale, scale), dtype=bool))
+    h, w = mask.shape
+    pad = scale * 2
+    y0, x0, y1, x1 = y, x, min(img.shape[0], y + h + 2 * pad), min(img.shape[1], x + w + 2 * pad)
+    img[y0:y1, x0:x1] = (img[y0:y1, x0:x1] * 0.35).astype(img.dtype)
+    region = img[y0 + pad:y0 + pad + h, x0 + pad:x0 + pad + w]
+    region[mask[: region.shape[0], : region.shape[1]]] = 255
+
+
+# ------------------------------------------------------------------ scene
+
+
+def _scene_model(model_path: str | Path | None, width: int, height: int):
+    """Scene model compiled with one extra fixed camera ("uvms_render") that we place ourselves."""
+    import mujoco
+
+    if model_path is None:
+        from .plant import default_model_path
+
+        model_path = default_model_path()
+    spec = mujoco.MjSpec.from_file(str(model_path))
+    spec.worldbody.add_camera(name="uvms_render", pos=[0, 0, 3], quat=[1, 0, 0, 0], fovy=45.0)
+    model = spec.compile()
+    model.vis.global_.offwidth = max(int(model.vis.global_.offwidth), width)
+    model.vis.global_.offheight = max(int(model.vis.global_.offheight), height)
+    return model
+
+
+def _pose(model, data) -> None:
+    """Kinematics, centres of mass (for tracking cameras), cameras and lights of data.qpos."""
+    import mujoco
+
+    mujoco.mj_kinematics(model, data)
+    mujoco.mj_comPos(model, data)
+    mujoco.mj_camlight(model, data)
+
+
+def _robot_extent(model, data, qs: np.ndarray) -> tuple[np.ndarray, np.ndarray, float]:
+    """World x-y bounds of the robot's visible geoms over configurations ``qs``, and their max z."""
+    import mujoco
+
+    geoms = [g for g in range(model.ngeom) if model.geom_bodyid[g] != 0 and model.geom_group[g] < 3]
+    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
+    pts = []
+    for q in qs:
+        data.qpos[: len(q)] = q
+        mujoco.mj_kinematics(model, data)
+        for g in geoms:
+            if model.geom_type[g] == mujoco.mjtGeom.mjGEOM_BOX:
+                local = signs * model.geom_size[g]
+            else:
+                local = signs * model.geom_rbound[g]
+            pts.append(data.geom_xpos[g] + local @ data.geom_xmat[g].reshape(3, 3).T)
+    pts = np.concatenate(pts) if pts else np.zeros((1, 3))
+    return pts[:, :2].min(axis=0), pts[:, :2].max(axis=0), float(pts[:, 2].max())
+
+
+def _place_camera(model, cam_id: int, lo: np.ndarray, hi: np.ndarray, z_near: float, aspect: float,
+                  margin: float = 0.12) -> None:
+    """Side view along -Z (image right +X, up +Y) framing the box [lo, hi] on the plane z = z_near."""
+    center = 0.5 * (lo + hi)
+    half = 0.5 * (hi - lo) * (1 + 2 * margin) + 0.05
+    tan_half = math.tan(math.radians(model.cam_fovy[cam_id]) / 2)
+    dist = max(half[1], half[0] / aspect) / tan_half
+    model.cam_pos[cam_id] = (center[0], center[1], z_near + dist)
+    model.cam_quat[cam_id] = (1.0, 0.0, 0.0, 0.0)
+
+
+def _to_front(points: np.ndarray, eye: np.ndarray, z_front: float) -> np.ndarray:
+    """Move points (N, 3) along the ray towards ``eye`` to z = z_front: same image position, but
+    drawn in front of the robot (whose geoms reach z_front)."""
+    if eye[2] <= z_front + 1e-6:
+        return points
+    s = ((z_front - points[:, 2]) / (eye[2] - points[:, 2]))[:, None]
+    return points + s * (eye - points)
+
+
+_TRACE_TOL = 0.5e-3  # m
+_RGBA_DESIRED = np.array([0.2, 1.0, 0.35, 0.9], dtype=np.float32)
+_RGBA_TRACE = np.array([1.0, 0.25, 0.2, 1.0], dtype=np.float32)
+
+
+def _add_polyline(scene, pts: np.ndarray, rgba: np.ndarray, width: float) -> None:
+    import mujoco
+
+    line = mujoco.mjtGeom.mjGEOM_LINE
+    zero3, eye9 = np.zeros(3), np.eye(3).ravel()
+    for a, b in zip(pts[:-1], pts[1:]):
+        if scene.ngeom >= scene.maxgeom:
+            return
+        g = scene.geoms[scene.ngeom]
+        mujoco.mjv_initGeom(g, line, zero3, zero3, eye9, rgba)
+        mujoco.mjv_connector(g, line, width, a, b)
+        g.category = mujoco.mjtCatBit.mjCAT_DECOR
+        scene.ngeom += 1
+
+
+def _add_sphere(scene, pos: np.ndarray, radius: float, rgba: np.ndarray) -> None:
+    import mujoco
+
+    if scene.ngeom >= scene.maxgeom:
+        return
+    g = scene.geoms[scene.ngeom]
+    mujoco.mjv_initGeom(g, mujoco.mjtGeom.mjGEOM_SPHERE, np.array([radius, 0, 0]), pos, np.eye(3).ravel(), rgba)
+    g.category = mujoco.mjtCatBit.mjCAT_DECOR
+    scene.ngeom += 1
+
+
+# ------------------------------------------------------------------ frames and video
+
+
+def _frame_times(t: np.ndarray, fps: float, speed: float, max_seconds: float | None) -> np.ndarray:
+    seconds = (float(t[-1]) - float(t[0])) / speed
+    if max_seconds is not None:
+        seconds = min(seconds, float(max_seconds))
+    n = max(1, int(round(seconds * fps)))
+    return float(t[0]) + np.arange(n) * (speed / fps)
+
+
+class _Replay:
+    """Scene, camera, overlays and GL context for replaying a log; iterate for the frames."""
+
+    def __init__(self, log, fps: float, size: tuple[int, int], camera: str | int | None, speed: float,
+                 max_seconds: float | None, model_path: str | Path | None, clock: bool) -> None:
+        import mujoco
+
+        width, height = int(size[0]), int(size[1])
+        if width < 16 or height < 16:
+            raise ValueError(f"size = {size!r}: width and height must be at least 16 pixels")
+        if not (fps > 0 and speed > 0):
+            raise ValueError(f"fps = {fps!r} and speed = {speed!r} must be > 0")
+        ts = np.asarray(log.t, dtype=float).ravel()
+        q_log = _signal(log, "q_true")
+        if q_log is None or q_log.ndim != 2 or len(q_log) != len(ts) or len(ts) < 1:
+            raise ValueError("the log has no q_true signal matching its time base: nothing to replay")
+        tip = _signal(log, "tip_true")
+        if tip is not None and (tip.ndim != 2 or tip.shape[1] < 2 or len(tip) != len(ts)):
+            tip = None
+        pd = _signal(log, "p_desired")
+        desired = pd[:, 3:5] if pd is not None and pd.ndim == 2 and pd.shape[1] >= 5 and len(pd) == len(ts) \
+            else None
+        # Drop samples that are not finite (a run stopped by a divergence may end with some).
+        ok = np.isfinite(ts) & np.isfinite(q_log).all(axis=1)
+        for arr in (tip, desired):
+            if arr is not None:
+                ok &= np.isfinite(arr[:, :2]).all(axis=1)
+        if not ok.any():
+            raise ValueError("the log has no sample with a finite q_true: nothing to replay")
+        ts, q_log = ts[ok], q_log[ok]
+        tip = tip[ok, :2] if tip is not None else None
+        desired = desired[ok] if desired is not None else None
+        if len(ts) == 1:  # a single sample: a still picture of 1 / fps
+            dup = lambda a: None if a is None else np.vstack([a, a])  # noqa: E731
+            ts, q_log, tip, desired = np.r_[ts, ts + 1.0 / fps], dup(q_log), dup(tip), dup(desired)
+        self.ts, self.speed, self.clock, self.height = ts, speed, clock, height
+        self.frame_t = _frame_times(ts, fps, speed, max_seconds)
+
+        model = self.model = _scene_model(model_path, width, height)
+        data = self.data = mujoco.MjData(model)
+        self.nq = nq = min(model.nq, q_log.shape[1])
+        self.qs = _interp(self.frame_t, ts, q_log[:, :nq])
+
+        if tip is None and mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, "tip") >= 0:
+            # no logged tip: the model's "tip" site
+            sid = model.site("tip").id
+            tip = np.empty((len(q_log), 2))
+            for k, q in enumerate(q_log):
+                data.qpos[:nq] = q[:nq]
+                mujoco.mj_kinematics(model, data)
+                tip[k] = data.site_xpos[sid, :2]
+        self.tip, self.desired = tip, desired
+
+        # Camera: the fitted side view, or a camera of the scene.
+        stride = _decimate(len(self.qs), 60)
+        lo, hi, z_robot = _robot_extent(model, data, np.vstack([self.qs[::stride], self.qs[-1:]]))
+        shown = ts <= self.frame_t[-1] + 1e-9  # the part of the log in the video
+        for path in (desired, tip):
+            if path is not None:
+                lo, hi = np.minimum(lo, path[shown].min(axis=0)), np.maximum(hi, path[shown].max(axis=0))
+        self.z_front = z_robot + 0.01
+        if camera is None:
+            self.cam = model.camera("uvms_render").id
+            _place_camera(model, self.cam, lo, hi, z_robot, width / height)
+        elif isinstance(camera, str):
+            if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera) < 0:
+                names = [model.camera(i).name for i in range(model.ncam) if model.camera(i).name != "uvms_render"]
+                raise ValueError(f"camera {camera!r} is not in the scene; cameras: {names}")
+            self.cam = model.camera(camera).id
+        else:
+            self.cam = int(camera)
+            if not 0 <= self.cam < model.ncam:
+                raise ValueError(f"camera id {camera!r} out of range 0..{model.ncam - 1}")
+
+        # Polylines in the plane of motion (z = 0), simplified to within 0.5 mm (well under a
+        # pixel of the fitted view), and at most ~300 segments.
+        self.desired_pts = None
+        if desired is not None:
+            keep = _thin(_simplify(desired, _TRACE_TOL), 300)
+            self.desired_pts = np.c_[desired[keep], np.zeros(len(keep))]
+        self.tip_keep = _thin(_simplify(tip, _TRACE_TOL), 300) if tip is not None else None
+        self.renderer = _make_renderer(model, height, width)
+
+    def __len__(self) -> int:
+        return len(self.frame_t)
+
+    def __iter__(self) -> Iterator[tuple[float, np.ndarray]]:
+        import mujoco
+
+        ts, tip, desired, renderer = self.ts, self.tip, self.desired, self.renderer
+        scene = renderer.scene
+        for tf, q in zip(self.frame_t, self.qs):
+            self.data.qpos[: self.nq] = q
+            _pose(self.model, self.data)
+            renderer.update_scene(self.data, camera=self.cam)
+            eye = 0.5 * (np.asarray(scene.camera[0].pos) + np.asarray(scene.camera[1].pos))
+            if self.desired_pts is not None:
+                # thin, in front of the (thicker) trace so that both stay visible when they overlap
+                _add_polyline(scene, _to_front(self.desired_pts, eye, self.z_front + 0.01), _RGBA_DESIRED, 2.0)
+                now = np.r_[np.interp(tf, ts, desired[:, 0]), np.interp(tf, ts, desired[:, 1]), 0.0]
+                _add_sphere(scene, _to_front(now[None], eye, self.z_front + 0.02)[0], 0.008, _RGBA_DESIRED)
+            if tip is not None:
+                k = int(np.searchsorted(ts, tf, side="right"))  # samples at or before tf
+                now = [np.interp(tf, ts, tip[:, 0]), np.interp(tf, ts, tip[:, 1])]
+                kept = self.tip_keep[: int(np.searchsorted(self.tip_keep, k))]
+                pts = np.vstack([tip[kept], tip[k - 1:k], now])
+                if len(pts) >= 2:
+                    pts = np.c_[pts, np.zeros(len(pts))]
+                    _add_polyline(scene, _to_front(pts, eye, self.z_front), _RGBA_TRACE, 5.0)
+            frame = renderer.render()
+            if self.clock:
+                text = f"t = {tf:5.2f} s" if self.speed == 1 else f"t = {tf:5.2f} s  x{self.speed:g}"
+                _stamp_text(frame, text, scale=max(1, self.height // 240))
+            yield float(tf), frame
+
+    def close(self) -> None:
+        self.renderer.close()
+
+
+def render_frames(
+    log,
+    fps: float = 30.0,
+    size: tuple[int, int] = (640, 480),
+    camera: str | int | None = None,
+    speed: float = 1.0,
+    max_seconds: float | None = None,
+    model_path: str | Path | None = None,
+    clock: bool = True,
+) -> Iterator[tuple[float, np.ndarray]]:
+    """Yield (log time [s], RGB frame (height, width, 3) uint8) for each video frame.
+
+    The frame buffer is reused: copy a frame to keep it past the next iteration.
+    See :func:`render_video` for the arguments.
+    """
+    replay = _Replay(log, fps, size, camera, speed, max_seconds, model_path, clock)
+    try:
+        yield from replay
+    finally:
+        replay.close()
+
+
+def _open_writer(out_path: Path, width: int, height: int, fps: float):
+    import imageio_ffmpeg
+
+    if width % 2 or height % 2:
+        raise ValueError(f"size = ({width}, {height}): H.264 with yuv420p needs even width and height")
+    writer = imageio_ffmpeg.write_frames(
+        str(out_path), (width, height), fps=fps, codec="libx264", pix_fmt_in="rgb24", pix_fmt_out="yuv420p",
+        quality=None, macro_block_size=2, ffmpeg_log_level="error",
+        output_params=["-preset", "veryfast", "-crf", "23", "-movflags", "+faststart"],
+    )
+    writer.send(None)
+    return writer
+
+
+def render_video(
+    log,
+    out_path: str | Path,
+    fps: float = 30,
+    size: tuple[int, int] = (640, 480),
+    camera: str | int | None = None,
+    speed: float = 1.0,
+    max_seconds: float | None = None,
+    on_frame: Callable[[int, int], None] | None = None,
+    model_path: str | Path | None = None,
+) -> dict[str, Any]:
+    """Replay a run's true motion into the MuJoCo scene and write an MP4 video.
+
+    Args:
+        log: a run (``RunResult`` or a log read back from disk): ``.t`` (N,) and ``.signals``
+            with ``q_true`` (N, 5); ``p_desired`` and ``tip_true`` are drawn when present.
+        out_path: the MP4 file to write (folders are created).
+        fps: video frame rate; frame i shows log time t[0] + i * speed / fps.
+        size: (width, height) in pixels (even numbers).
+        camera: None for a fixed side view along -Z (image up = +Y) fitted to the whole logged
+            motion and the desired path; else a camera of the scene by name ("side", "track") or id.
+        speed: log seconds per video second.
+        max_seconds: cap on the video length [s].
+        on_frame: progress callback (frame index, number of frames).
+        model_path: scene model (default: the package's models/scene.xml).
+
+    Returns:
+        {"path", "frames", "seconds" (video length), "fps", "size", "render_fps" (frames per
+        second of scene update + rendering alone), "setup_s" (scene and GL context), "wall_s" (total,
+        encoding included)}.
+
+    Raises:
+        RenderError: no usable OpenGL (one-line message naming the packages to install).
+        ValueError: bad arguments or a log without ``q_true``.
+    """
+    out_path = Path(out_path)
+    width, height = int(size[0]), int(size[1])
+    if width % 2 or height % 2:
+        raise ValueError(f"size = {size!r}: H.264 with yuv420p needs even width and height")
+    t_start = time.perf_counter()
+    replay = _Replay(log, fps, (width, height), camera, speed, max_seconds, model_path, clock=True)
+    setup_s = time.perf_counter() - t_start
+    render_s, n, writer = 0.0, 0, None
+    try:
+        out_path.parent.mkdir(parents=True, exist_ok=True)
+        writer = _open_writer(out_path, width, height, fps)
+        frames = iter(replay)
+        while True:
+            t0 = time.perf_counter()
+            item = next(frames, None)
+            render_s += time.perf_counter() - t0
+            if item is None:
+                break
+            writer.send(np.ascontiguousarray(item[1]))
+            n += 1
+            if on_frame is not None:
+                on_frame(n - 1, len(replay))
+    finally:
+        replay.close()
+        if writer is not None:
+            writer.close()
+    wall = time.perf_counter() - t_start
+    return {
+        "path": str(out_path),
+        "frames": n,
+        "seconds": n / fps,
+        "fps": fps,
+        "size": (width, height),
+        "render_fps": n / render_s if render_s > 0 else float("inf"),
+        "setup_s": setup_s,
+        "wall_s": wall,
+    }
