@@ -68,3 +68,29 @@ def test_bad_input_exits_2_with_a_message(tmp_path):
     assert result.exit_code == 2 and "registered:" in result.output
     result = runner.invoke(main, ["validate", str(SCENARIOS / "paper.yaml")])
     assert result.exit_code == 0 and "ok" in result.output
+
+
+def test_sigterm_closes_the_log_cleanly(tmp_path):
+    """SIGTERM during `uvms-mj run`: exit 130, and the log is complete (normal reader) with
+    status 'interrupted' and the samples up to then."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    out = tmp_path / "long.mcap"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "uvms_mj.cli", "run", str(SCENARIOS / "paper.yaml"), "--out", str(out),
+         "--no-plots", "--set", "duration=600"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )
+    deadline = time.time() + 60
+    while not (out.exists() and out.stat().st_size > 20_000) and time.time() < deadline:
+        time.sleep(0.1)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err
+    assert "closed cleanly" in err and "Traceback" not in err
+    log = read_log(out)
+    assert not log.truncated and log.status == "interrupted"
+    assert 1.0 < log.t[-1] < 600.0

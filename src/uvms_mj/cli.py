@@ -87,30 +87,15 @@ def _run_one(scenario, out: Path, progress: bool = True):
     except (ScenarioError, ParameterError, ValueError) as exc:
         raise click.UsageError(str(exc)) from None
     meta = {"scenario": resolved(scenario), "seed": scenario.seed}
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=int(scenario.duration * 60) + 1, desc=f"{scenario.name} [{scenario.controller.name}]",
-                   unit="sample", leave=False, disable=None)
-
-    def tick(k: int, n: int) -> None:
-        if bar is not None:
-            bar.total = n
-            bar.update(1)
-
-    with handle_sigterm(), McapRecorder(out, plant.params, meta) as rec:
+    with _progress(f"{scenario.name} [{scenario.controller.name}]", "sample") as tick, handle_sigterm(), \
+            McapRecorder(out, plant.params, meta) as rec:
         try:
-            res = run_scenario(scenario, sink=rec.write_sample, on_sample=tick)
-        except KeyboardInterrupt:
-            rec.close(status="interrupted", reason="interrupted (Ctrl-C or SIGTERM)")
-            if bar is not None:
-                bar.close()
+            res = run_scenario(scenario, sink=rec.write_sample, on_sample=tick if progress else None)
+        except KeyboardInterrupt as exc:
+            rec.close(status="interrupted", reason=str(exc) or "interrupted (Ctrl-C)")
             click.echo(f"interrupted; partial log closed cleanly: {out}", err=True)
             sys.exit(EXIT_INTERRUPTED)
-        rec.close(status=res.status, reason=res.reason)
-    if bar is not None:
-        bar.close()
+        rec.close(status=res.status, reason=res.reason, meta=res.meta)
     return res, out, metrics(res)
 
 
@@ -131,11 +116,31 @@ def _video(log_path: Path, video_path: Path, scenario=None) -> None:
     if scenario is not None:
         kw = {"fps": scenario.outputs.video_fps, "size": tuple(scenario.outputs.video_size)}
     try:
-        info = render_video(log, video_path, **kw)
+        with _progress(f"render {video_path.name}", "frame") as tick:
+            info = render_video(log, video_path, on_frame=tick, **kw)
     except RenderError as exc:
         click.echo(f"error: {exc}", err=True)
         sys.exit(EXIT_RENDER)
     click.echo(f"video: {video_path} ({info['frames']} frames)")
+
+
+class _progress:
+    """A tqdm bar (shown on terminals only) as a context manager yielding a (k, n) callback."""
+
+    def __init__(self, desc: str, unit: str) -> None:
+        from tqdm import tqdm
+
+        self.bar = tqdm(desc=desc, unit=unit, leave=False, disable=None)
+
+    def __enter__(self):
+        def tick(k: int, n: int) -> None:
+            self.bar.total = n
+            self.bar.update(1)
+
+        return tick
+
+    def __exit__(self, *exc) -> None:
+        self.bar.close()
 
 
 @main.command()
@@ -219,7 +224,8 @@ def render(log: str, output: str | None, fps: int, size: tuple[int, int]) -> Non
 
     out = Path(output) if output else Path(log).with_suffix(".mp4")
     try:
-        info = render_video(read_log(log), out, fps=fps, size=size)
+        with _progress(f"render {out.name}", "frame") as tick:
+            info = render_video(read_log(log), out, fps=fps, size=size, on_frame=tick)
     except RenderError as exc:
         click.echo(f"error: {exc}", err=True)
         sys.exit(EXIT_RENDER)
