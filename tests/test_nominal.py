@@ -40,3 +40,14 @@ def test_block_split():
     assert M_BB.shape == (3, 3) and M_BM.shape == (3, 2) and M_MM.shape == (2, 2)
     np.testing.assert_array_equal(M_BM, M_MB.T)
     np.testing.assert_array_equal(np.r_[h_B, h_M], dyn.h)
+
+
+def test_fast_dynamics_equals_term_by_term(rng):
+    """dynamics() (rigid bodies as isotropic added mass, one closed-form pass, native when
+    available) equals the term-by-term mass_matrix() and bias() to 1e-12."""
+    nominal = NominalModel()
+    for _ in range(30):
+        q, qd = random_q(rng), random_qd(rng, 2.0)
+        dyn = nominal.dynamics(q, qd)
+        np.testing.assert_allclose(dyn.M, nominal.mass_matrix(q), rtol=0, atol=1e-12 * 100)
+        np.testing.assert_allclose(dyn.h, nominal.bias(q, qd), rtol=0, atol=1e-12 * 100)

@@ -107,13 +107,16 @@ def run_closed_loop(
     status, reason = "ok", ""
     q_prev_meas = None
 
+    noisy = bool(sensor.position_noise or sensor.angle_noise)
+    quantized = bool(sensor.position_quantum or sensor.angle_quantum)
+
     def measure(k: int) -> Measurement:
         nonlocal q_prev_meas
         q = plant.q
-        noise = np.r_[rng.normal(0, sensor.position_noise, 2), rng.normal(0, sensor.angle_noise, 3)] \
-            if (sensor.position_noise or sensor.angle_noise) else 0.0
-        q = q + noise
-        q = np.r_[_quantize(q[:2], sensor.position_quantum), _quantize(q[2:], sensor.angle_quantum)]
+        if noisy:
+            q = q + np.concatenate((rng.normal(0, sensor.position_noise, 2), rng.normal(0, sensor.angle_noise, 3)))
+        if quantized:
+            q = np.concatenate((_quantize(q[:2], sensor.position_quantum), _quantize(q[2:], sensor.angle_quantum)))
         qd = None
         if sensor.velocity_sensor:
             qd = plant.qd + (rng.normal(0, sensor.velocity_noise, 5) if sensor.velocity_noise else 0.0)
@@ -128,7 +131,7 @@ def run_closed_loop(
         if k == 0:
             controller.reset(meas)
         cmd: Command = controller.compute(meas)
-        if not (np.all(np.isfinite(cmd.thrust)) and np.all(np.isfinite(cmd.torques))):
+        if not math.isfinite(float(np.sum(cmd.thrust)) + float(np.sum(cmd.torques))):
             status, reason = "diverged", f"controller output not finite at t = {k * T:.4f} s"
             break
         plant.set_thrust(cmd.thrust)

@@ -13,16 +13,20 @@ arm rows M = (3, 4).
 
 from __future__ import annotations
 
+import ctypes
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import mujoco
 import numpy as np
 
+from . import native as _native
 from .hydro import HydroModel, HydroTerms
 from .kinematics import ArmGeometry
 from .params import RobotParams, read_params
+
+_TRIL = np.tril_indices(5)
 
 B = slice(0, 3)  # base rows/columns (fx, fy, tau0)
 M_ = slice(3, 5)  # arm rows/columns (tau1, tau2)
@@ -51,6 +55,62 @@ class Dynamics:
         return M[B, B], M[B, M_], M[M_, B], M[M_, M_], h[B], h[M_]
 
 
+def rigid_as_hydro(params: RobotParams) -> RobotParams:
+    """The rigid bodies written as "isotropic added mass" at their centres of mass, with their
+    weight as a negative buoyancy there: a rigid body of mass m and inertia I has exactly the
+    kinetic energy, Coriolis/centrifugal force and weight that :class:`HydroModel` gives an
+    isotropic added mass (m, m, I) and a volume -m/rho at its centre of mass, so one closed form
+    serves both parts of the nominal dynamics."""
+    bodies = tuple(
+        replace(b, added_mass=(b.mass, b.mass), added_inertia=b.inertia, box_center=b.com,
+                drag_coef=(0.0, 0.0), volume=-b.mass / params.rho, cob=b.com)
+        for b in params.bodies
+    )
+    return replace(params, bodies=bodies)
+
+
+class _Evaluator:
+    """HydroModel.evaluate on preallocated buffers: the native C code when it is available (and
+    not disabled by UVMS_MJ_BACKEND=python), else the Python reference. Returns numpy arrays:
+    the 5x5 matrix and the generalized force."""
+
+    def __init__(self, hydro: HydroModel) -> None:
+        self.hydro = hydro
+        self.lib = None
+        try:
+            if _native.backend_from_env() != "python":
+                self.lib = _native.load()
+        except ValueError:
+            self.lib = None
+        if self.lib is not None:
+            self.params = _native.make_params(hydro)
+            self.buf = {k: np.zeros(n) for k, n in (("q", 5), ("qd", 5), ("w", 2), ("g", 2), ("m", 15), ("f", 5))}
+            dp = ctypes.POINTER(ctypes.c_double)
+            self.ptr = {k: v.ctypes.data_as(dp) for k, v in self.buf.items()}
+            self.fn = self.lib._lib.uvms_evaluate
+            self.pref = ctypes.byref(self.params)
+
+    def __call__(self, q, qd, wind, gravity) -> tuple[np.ndarray, np.ndarray]:
+        if self.lib is None:
+            madd, qf = self.hydro.evaluate(list(map(float, q)), list(map(float, qd)), wind, gravity, True)
+            m = np.asarray(madd) if madd else np.zeros(15)
+            qf = np.asarray(qf)
+        else:
+            b, p = self.buf, self.ptr
+            b["q"][:] = q
+            b["qd"][:] = qd
+            b["w"][:] = wind
+            b["g"][:] = gravity
+            b["m"][:] = 0.0  # the C function accumulates into its outputs
+            b["f"][:] = 0.0
+            self.fn(self.pref, p["q"], p["qd"], p["w"], p["g"], p["m"] if self.params.exact else None, p["f"])
+            m, qf = (b["m"] if self.params.exact else np.zeros(15)), b["f"].copy()
+        M = np.zeros((5, 5))
+        M[_TRIL] = m
+        M.T[_TRIL] = m
+        return M, qf
+
+
 class NominalModel:
     """M̄(q), N̄(q, q̇)q̇, f̄_D and ḡ of the paper's Eqs. 6-7 for given nominal parameters.
 
@@ -68,6 +128,9 @@ class NominalModel:
         self._am = HydroModel(self.params, HydroTerms(added_mass="exact", drag="off", buoyancy=False))
         self._drag = HydroModel(self.params, HydroTerms(added_mass="off", drag="strip", buoyancy=False))
         self._buoy = HydroModel(self.params, HydroTerms(added_mass="off", drag="off", buoyancy=True))
+        # Fast path for dynamics(): rigid part (see rigid_as_hydro) and hydrodynamic part.
+        self._fast_rigid = _Evaluator(HydroModel(rigid_as_hydro(self.params), HydroTerms(drag="off")))
+        self._fast_hydro = _Evaluator(HydroModel(self.params, HydroTerms()))
 
     # ---------------------------------------------------------------- rigid chain
 
@@ -148,4 +211,8 @@ class NominalModel:
         return self.coriolis(q, qd) + self.drag(q, qd) + self.gravity_buoyancy(q)
 
     def dynamics(self, q, qd) -> Dynamics:
-        return Dynamics(self.mass_matrix(q), self.bias(q, qd))
+        """M̄(q) and h = N̄q̇ + f̄_D + ḡ in one pass (the controller's 60 Hz path; equals
+        mass_matrix() and bias(), which spell the terms out separately)."""
+        M1, Q1 = self._fast_rigid(q, qd, (0.0, 0.0), self.gravity)
+        M2, Q2 = self._fast_hydro(q, qd, (0.0, 0.0), self.gravity)
+        return Dynamics(M1 + M2, -(Q1 + Q2))

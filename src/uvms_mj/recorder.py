@@ -306,9 +306,19 @@ _ENCODER = json.JSONEncoder(separators=(",", ":"), allow_nan=False)
 _ENCODER_NAN = json.JSONEncoder(separators=(",", ":"), allow_nan=True)
 
 
+try:  # orjson: the same text (shortest round-trip floats) about 20x faster than json
+    import orjson as _orjson
+except ImportError:  # pragma: no cover - orjson is a dependency; keep working without it
+    _orjson = None
+
+
 def _enc(obj: Any) -> str:
     """Compact JSON text of a list or dict; NaN -> null, +-inf -> +-1e999 (valid JSON that
     Python and JavaScript parse back to +-inf)."""
+    if _orjson is not None:
+        out = _orjson.dumps(obj)
+        if b"null" not in out:  # orjson writes NaN and +-inf as null: let json handle those
+            return out.decode()
     try:
         return _ENCODER.encode(obj)
     except ValueError:

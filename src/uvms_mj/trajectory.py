@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -42,17 +43,25 @@ class StraightLine:
         if not (math.isfinite(self.t_start) and self.t_start >= 0):
             raise ValueError(f"trajectory.t_start = {self.t_start!r} must be finite and >= 0")
 
-    @property
+    @cached_property
     def length(self) -> float:
         return float(np.hypot(self.target[0] - self.start[0], self.target[1] - self.start[1]))
 
-    @property
+    @cached_property
     def direction(self) -> np.ndarray:
-        d = np.subtract(self.target, self.start)
+        d = np.subtract(self.target, self.start).astype(float)
         n = np.linalg.norm(d)
         return d / n if n > 0 else np.zeros(2)
 
+    @cached_property
+    def _start(self) -> np.ndarray:
+        return np.asarray(self.start, dtype=float)
+
     def _profile(self) -> tuple[float, float, float]:
+        return self._profile_cached
+
+    @cached_property
+    def _profile_cached(self) -> tuple[float, float, float]:
         """(peak speed, ramp time, cruise time)."""
         v, a, L = self.cruise_speed, self.accel, self.length
         if v * v / a > L:  # triangular
@@ -85,7 +94,7 @@ class StraightLine:
 
     def position(self, t: float) -> np.ndarray:
         """Desired tip position p_ed(t) (world, m)."""
-        return np.asarray(self.start, dtype=float) + self.distance(t) * self.direction
+        return self._start + self.distance(t) * self.direction
 
     def cruise_velocity(self) -> np.ndarray:
         """The cruise velocity vector (world, m/s): what Eq. 12 gives the base to follow."""

@@ -90,14 +90,23 @@ class SingularHandler:
         return self.v
 
 
+def _inv2(a: float, b: float, c: float, d: float) -> np.ndarray:
+    """Inverse of [[a, b], [c, d]] in closed form."""
+    det = a * d - b * c
+    return np.array([[d / det, -b / det], [-c / det, a / det]])
+
+
 def damped_inverse(B: np.ndarray, threshold: float, damping: float) -> tuple[np.ndarray, bool]:
     """B^-1, or damped least squares B^T (B B^T + mu^2 I)^-1 when |det B| < threshold, with
     mu^2 = damping^2 (1 - (det / threshold)^2): never inf or NaN (Nakamura-Hanafusa)."""
-    d = float(np.linalg.det(B))
-    if abs(d) >= threshold:
-        return np.linalg.inv(B), False
-    mu2 = damping * damping * (1.0 - (d / threshold) ** 2)
-    return B.T @ np.linalg.inv(B @ B.T + mu2 * np.eye(2)), True
+    (a, b), (c, d_) = B.tolist()
+    det = a * d_ - b * c
+    if abs(det) >= threshold:
+        return _inv2(a, b, c, d_), False
+    mu2 = damping * damping * (1.0 - (det / threshold) ** 2)
+    # B B^T + mu^2 I is symmetric positive definite (mu > 0 whenever det B = 0).
+    G = _inv2(a * a + b * b + mu2, a * c + b * d_, a * c + b * d_, c * c + d_ * d_ + mu2)
+    return B.T @ G, True
 
 
 # ------------------------------------------------------------------ RAC
@@ -177,11 +186,18 @@ class RAC(Controller):
 
     def _task(self, q: np.ndarray) -> np.ndarray:
         """p = (x0, pe) (world frame)."""
-        return np.r_[q[:3], tip_position(self.geom, q)]
+        p = np.empty(5)
+        p[:3] = q[:3]
+        p[3:] = tip_position(self.geom, q)
+        return p
 
     def _desired(self, k: int) -> np.ndarray:
         """p_d(k): base desired pose (reference + Eq. 12 offset) and the tip path."""
-        return np.r_[self._x0_ref + np.r_[self._base_offset[k], 0.0], self.trajectory.position(k * self.T)]
+        p = np.empty(5)
+        p[:3] = self._x0_ref
+        p[:2] += self._base_offset[k]
+        p[3:] = self.trajectory.position(k * self.T)
+        return p
 
     # ---------------------------------------------------------------- interface
 
@@ -196,9 +212,10 @@ class RAC(Controller):
         self._e_p_prev = np.zeros(5)
         self._q_prev = q.copy()
         self._p_prev = self._task(q)
-        self._J_prev = task_jacobian(self.geom, q)
+        A, B = jacobians(self.geom, q)
+        self._AB_prev = np.hstack((A, B))
         qd0 = np.zeros(5) if m.qd is None else np.asarray(m.qd, dtype=float)
-        M = self.nominal.mass_matrix(q)
+        M = self.nominal.dynamics(q, qd0).M
         self.filter.reset(self.g * M[:3, :3] @ qd0[:3])  # f_E_hat(0) = 0
 
     def compute(self, m: Measurement) -> Command:
@@ -206,16 +223,17 @@ class RAC(Controller):
         q = np.asarray(m.q, dtype=float)
         p = self._task(q)
         # Velocities: a velocity sensor, or backward differences of the measured positions.
+        A, B = jacobians(self.geom, q)
+        AB = np.hstack((A, B))  # the tip rows of J = [[I, 0], [A, B]]
         if m.qd is None:
             qd = (q - self._q_prev) / T if k > self._k0 else np.zeros(5)
             pd_meas = (p - self._p_prev) / T if k > self._k0 else np.zeros(5)
         else:
             qd = np.asarray(m.qd, dtype=float)
-            pd_meas = task_jacobian(self.geom, q) @ qd
+            pd_meas = np.concatenate((qd[:3], AB @ qd))
 
         # Eq. 12: singular-configuration handling moves the base's desired position.
-        A, B = jacobians(self.geom, q)
-        detb = float(np.linalg.det(B))
+        detb = float(B[0, 0] * B[1, 1] - B[0, 1] * B[1, 0])
         v_base = self.singular.update(k, detb)
         self._base_offset[k + 1] = self._base_offset[k] + T * v_base
 
@@ -227,10 +245,11 @@ class RAC(Controller):
         e_v = v_d - pd_meas
         a_d = (v_d_next - v_d + self.lam * e_v) / T  # Eq. 10
 
-        # q_ddot_d = J^-1 (a_d - J_dot q_dot), J_dot by backward difference (Eq. 9).
-        J = task_jacobian(self.geom, q)
-        J_dot = (J - self._J_prev) / T if k > self._k0 else np.zeros((5, 5))
-        rhs = a_d - J_dot @ qd
+        # q_ddot_d = J^-1 (a_d - J_dot q_dot), J_dot by backward difference (Eq. 9); J_dot has
+        # only the tip rows, since the base rows of J are constant.
+        rhs = a_d.copy()
+        if k > self._k0:
+            rhs[3:] -= (AB - self._AB_prev) @ qd / T
         B_inv, dls = damped_inverse(B, self.dls_threshold, self.dls_damping)
         qdd_d = np.empty(5)
         qdd_d[:3] = rhs[:3]
@@ -250,7 +269,7 @@ class RAC(Controller):
             self.filter.advance(applied - f_t + self.g * M_BB @ qd[:3])
 
         self._p_d_prev, self._e_p_prev = p_d, e_p
-        self._q_prev, self._p_prev, self._J_prev = q, p, J
+        self._q_prev, self._p_prev, self._AB_prev = q, p, AB
         return Command(
             thrust=alloc.thrust,
             torques=u_M,

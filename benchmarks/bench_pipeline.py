@@ -1,0 +1,149 @@
+"""End-to-end speed of the paper scenario: plant + controller + logging.
+
+    python benchmarks/bench_pipeline.py [--repeats 3] [--sweep-runs 8]
+
+Prints, for scenarios/paper.yaml (40 s, rac_dob):
+  * the real-time factor of the whole pipeline (plant with hydrodynamics + 60 Hz controller +
+    MCAP logging) and of the pipeline without logging;
+  * its ratio to bare MuJoCo stepping of the same model (no hydrodynamics, same integrator and
+    timestep) over the same number of steps;
+  * the split of the time between MuJoCo, hydrodynamics, controller, logging and the loop;
+  * sweep throughput (runs per second) with 1 and 2 worker processes.
+Best of --repeats (the machine is shared and noisy).
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures as cf
+import multiprocessing as mp
+import tempfile
+import time
+from pathlib import Path
+
+import mujoco
+
+from uvms_mj import default_model_path
+from uvms_mj.loop import run_closed_loop
+from uvms_mj.recorder import McapRecorder
+from uvms_mj.scenario import build, load_scenario
+
+SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "paper.yaml"
+
+
+class Timer:
+    """Wraps a callable and accumulates its wall time."""
+
+    def __init__(self, fn):
+        self.fn, self.total = fn, 0.0
+
+    def __call__(self, *a, **kw):
+        t0 = time.perf_counter()
+        try:
+            return self.fn(*a, **kw)
+        finally:
+            self.total += time.perf_counter() - t0
+
+
+def one_run(log: bool, split: bool = False) -> dict:
+    sc = load_scenario(SCENARIO)
+    plant, ctrl = build(sc)
+    T = ctrl.T
+    timers = {}
+    if split:
+        timers["plant"] = plant.step = Timer(plant.step)
+        timers["controller"] = ctrl.compute = Timer(ctrl.compute)
+    with tempfile.TemporaryDirectory() as tmp:
+        rec = McapRecorder(Path(tmp) / "bench.mcap", plant.params, {"bench": True}) if log else None
+        sink = None
+        if rec is not None:
+            sink = rec.write_sample
+            if split:
+                sink = timers["logging"] = Timer(rec.write_sample)
+        t0 = time.perf_counter()
+        res = run_closed_loop(plant, ctrl, sc.duration, T=T, sensor=build_sensor(sc), seed=sc.seed,
+                              warm_start=sc.warm_start, sink=sink)
+        if rec is not None:
+            rec.close(res.status, res.reason)
+        wall = time.perf_counter() - t0
+    steps = round(sc.duration / plant.model.opt.timestep)
+    return {"wall": wall, "steps": steps, "sim": sc.duration, "timers": {k: v.total for k, v in timers.items()},
+            "integrator": plant.model.opt.integrator, "timestep": plant.model.opt.timestep, "backend": plant.backend}
+
+
+def build_sensor(sc):
+    from uvms_mj.loop import SensorModel
+
+    s = sc.sensors
+    return SensorModel(position_noise=s.position_noise, angle_noise=s.angle_noise,
+                       position_quantum=s.position_quantum, angle_quantum=s.angle_quantum, delay=s.delay,
+                       velocity_sensor=s.velocity_sensor, velocity_noise=s.velocity_noise)
+
+
+def bare(steps: int, integrator, timestep: float) -> float:
+    m = mujoco.MjModel.from_xml_path(str(default_model_path()))
+    m.opt.integrator, m.opt.timestep = integrator, timestep
+    d = mujoco.MjData(m)
+    mujoco.mj_resetDataKeyframe(m, d, 0)
+    t0 = time.perf_counter()
+    for _ in range(steps):
+        mujoco.mj_step(m, d)
+    return time.perf_counter() - t0
+
+
+def sweep_job(duration: float) -> float:
+    from uvms_mj.scenario import run_scenario
+
+    sc = load_scenario(SCENARIO, [f"duration={duration}"])
+    return run_scenario(sc).t[-1]
+
+
+def sweep_throughput(workers: int, runs: int, duration: float) -> float:
+    ctx = mp.get_context("spawn")
+    with cf.ProcessPoolExecutor(workers, mp_context=ctx) as ex:
+        list(ex.map(sweep_job, [1.0] * workers))  # start the workers (imports, native build)
+        t0 = time.perf_counter()
+        list(ex.map(sweep_job, [duration] * runs))
+        return runs / (time.perf_counter() - t0)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--sweep-runs", type=int, default=8)
+    ap.add_argument("--sweep-duration", type=float, default=10.0)
+    args = ap.parse_args()
+
+    full = min((one_run(log=True) for _ in range(args.repeats)), key=lambda r: r["wall"])
+    nolog = min((one_run(log=False) for _ in range(args.repeats)), key=lambda r: r["wall"])
+    split = min((one_run(log=True, split=True) for _ in range(args.repeats)), key=lambda r: r["wall"])
+    t_bare = min(bare(full["steps"], full["integrator"], full["timestep"]) for _ in range(args.repeats))
+
+    sim = full["sim"]
+    print(f"paper scenario: {sim:g} s simulated, {full['steps']} physics steps, backend {full['backend']}, "
+          f"best of {args.repeats}")
+    print(f"  pipeline with logging     {full['wall']:7.3f} s   {sim / full['wall']:6.1f}x real time   "
+          f"{full['wall'] / t_bare:5.1f}x bare MuJoCo")
+    print(f"  pipeline without logging  {nolog['wall']:7.3f} s   {sim / nolog['wall']:6.1f}x real time   "
+          f"{nolog['wall'] / t_bare:5.1f}x bare MuJoCo")
+    print(f"  bare MuJoCo stepping      {t_bare:7.3f} s   {sim / t_bare:6.1f}x real time")
+    tm = split["timers"]
+    parts = {
+        "MuJoCo (bare stepping)": t_bare,
+        "hydrodynamics (plant - bare)": max(tm["plant"] - t_bare, 0.0),
+        "controller (60 Hz compute)": tm["controller"],
+        "logging (MCAP write)": tm["logging"],
+    }
+    parts["loop, sensors, recording"] = max(split["wall"] - sum(parts.values()), 0.0)
+    print("  split of the pipeline (instrumented run, %.3f s):" % split["wall"])
+    for k, v in parts.items():
+        print(f"    {k:<32}{v:7.3f} s  {100 * v / split['wall']:5.1f} %")
+    if args.sweep_runs:
+        r1 = sweep_throughput(1, args.sweep_runs, args.sweep_duration)
+        r2 = sweep_throughput(2, args.sweep_runs, args.sweep_duration)
+        print(f"  sweep ({args.sweep_runs} runs of {args.sweep_duration:g} s, no logs): "
+              f"1 worker {r1:.2f} runs/s, 2 workers {r2:.2f} runs/s, speed-up {r2 / r1:.2f}x")
+
+
+if __name__ == "__main__":
+    main()
