@@ -317,6 +317,7 @@ class Plant:
 
         self._diverged: tuple[float, str] | None = None
         self._native_state: _native.Params | None = None  # native callback state of self.data
+        self._served: weakref.WeakSet[mujoco.MjData] = weakref.WeakSet()  # data served by this plant
         self._install()
         self.reset()
 
@@ -352,9 +353,31 @@ class Plant:
         self._attach(d)
         return d
 
+    def attach_data(self, d: mujoco.MjData) -> mujoco.MjData:
+        """Register an existing MjData of ``plant.model`` with the plant's hydrodynamics and
+        return it (e.g. ``copy.copy(plant.data)``, or the data under a dm_control Physics copy).
+
+        ``plant.data`` and data from :meth:`make_data` are served already: attaching them again
+        is a no-op. Only :meth:`step` on ``plant.data`` raises :class:`DivergenceError`; other
+        data are served the same hydrodynamics but their divergence is not tracked.
+
+        Raises:
+            TypeError: ``d`` is not a ``mujoco.MjData``.
+            ValueError: ``d`` belongs to another model (even a copy of ``plant.model``).
+        """
+        if not isinstance(d, mujoco.MjData):
+            raise TypeError(f"attach_data expects a mujoco.MjData, got {type(d).__name__}")
+        if d.model is not self.model:
+            raise ValueError("attach_data: the MjData must belong to plant.model (create it with "
+                             "mujoco.MjData(plant.model) or copy.copy(plant.data))")
+        if d not in self._served:
+            self._attach(d)
+        return d
+
     def _attach(self, d: mujoco.MjData) -> None:
         """Register the passive-force handler of data ``d``: it adds the exact added-mass
         matrix to d.M (then refactors it) and the hydrodynamic forces to d.qfrc_passive."""
+        self._served.add(d)
         if self._native_lib is not None:
             # The C callback does all of passive() below natively, with its own copy of the
             # constants and per-data state (added-mass guard, divergence status).
