@@ -26,7 +26,7 @@ import mujoco
 from uvms_mj import default_model_path
 from uvms_mj.loop import run_closed_loop
 from uvms_mj.recorder import McapRecorder
-from uvms_mj.scenario import build, load_scenario
+from uvms_mj.scenario import build, load_scenario, sensor_model
 
 SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "paper.yaml"
 
@@ -61,7 +61,7 @@ def one_run(log: bool, split: bool = False) -> dict:
             if split:
                 sink = timers["logging"] = Timer(rec.write_sample)
         t0 = time.perf_counter()
-        res = run_closed_loop(plant, ctrl, sc.duration, T=T, sensor=build_sensor(sc), seed=sc.seed,
+        res = run_closed_loop(plant, ctrl, sc.duration, T=T, sensor=sensor_model(sc), seed=sc.seed,
                               warm_start=sc.warm_start, sink=sink)
         if rec is not None:
             rec.close(res.status, res.reason)
@@ -69,15 +69,6 @@ def one_run(log: bool, split: bool = False) -> dict:
     steps = round(sc.duration / plant.model.opt.timestep)
     return {"wall": wall, "steps": steps, "sim": sc.duration, "timers": {k: v.total for k, v in timers.items()},
             "integrator": plant.model.opt.integrator, "timestep": plant.model.opt.timestep, "backend": plant.backend}
-
-
-def build_sensor(sc):
-    from uvms_mj.loop import SensorModel
-
-    s = sc.sensors
-    return SensorModel(position_noise=s.position_noise, angle_noise=s.angle_noise,
-                       position_quantum=s.position_quantum, angle_quantum=s.angle_quantum, delay=s.delay,
-                       velocity_sensor=s.velocity_sensor, velocity_noise=s.velocity_noise)
 
 
 def bare(steps: int, integrator, timestep: float) -> float:

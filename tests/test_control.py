@@ -9,7 +9,7 @@ from scipy import signal
 from uvms_mj import Plant
 from uvms_mj.allocation import Allocator, allocation_matrix
 from uvms_mj.controllers import ControllerError, Measurement, available, create
-from uvms_mj.controllers.builtin import PAPER_GAINS, LowPassZOH, damped_inverse
+from uvms_mj.controllers.builtin import LowPassZOH, damped_inverse
 from uvms_mj.experiment import PaperExperiment, metrics
 from uvms_mj.kinematics import jacobians, task_jacobian, tip_position
 from uvms_mj.loop import SensorModel, run_closed_loop

@@ -25,7 +25,7 @@ with warnings.catch_warnings():
 from uvms_mj.controllers.builtin import PAPER_T
 from uvms_mj.experiment import PaperExperiment
 from uvms_mj.loop import SensorModel, run_closed_loop
-from uvms_mj.scenario import Scenario, build, validate_scenario
+from uvms_mj.scenario import build, validate_scenario
 
 OBS_SHAPES = {"base_pose": 3, "joint_angles": 2, "base_velocity": 3, "joint_velocities": 2, "tip": 2,
               "target": 2, "goal": 2, "time_to_go": 1, "thrust": 3}

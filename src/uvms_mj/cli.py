@@ -83,14 +83,15 @@ def _run_one(scenario, out: Path, progress: bool = True):
 
     out.parent.mkdir(parents=True, exist_ok=True)
     try:
-        plant, _ = build(scenario)
+        plant, ctrl = build(scenario)
     except (ScenarioError, ParameterError, ValueError) as exc:
         raise click.UsageError(str(exc)) from None
     meta = {"scenario": resolved(scenario), "seed": scenario.seed}
     with _progress(f"{scenario.name} [{scenario.controller.name}]", "sample") as tick, handle_sigterm(), \
             McapRecorder(out, plant.params, meta) as rec:
         try:
-            res = run_scenario(scenario, sink=rec.write_sample, on_sample=tick if progress else None)
+            res = run_scenario(scenario, sink=rec.write_sample, on_sample=tick if progress else None,
+                               built=(plant, ctrl))
         except KeyboardInterrupt as exc:
             rec.close(status="interrupted", reason=str(exc) or "interrupted (Ctrl-C)")
             click.echo(f"interrupted; partial log closed cleanly: {out}", err=True)

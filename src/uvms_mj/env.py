@@ -530,7 +530,7 @@ def load(
         ValueError: bad time_limit or controller period.
     """
     from .experiment import PaperExperiment
-    from .scenario import Scenario, build, load_scenario
+    from .scenario import Scenario, build, load_scenario, sensor_model
 
     if scenario is None:
         scenario = Scenario()
@@ -541,10 +541,7 @@ def load(
         sensor, warm, duration = scenario.sensor, scenario.warm_start, scenario.duration
     elif isinstance(scenario, Scenario):
         plant, ctrl = build(scenario)
-        s = scenario.sensors
-        sensor = SensorModel(position_noise=s.position_noise, angle_noise=s.angle_noise,
-                             position_quantum=s.position_quantum, angle_quantum=s.angle_quantum, delay=s.delay,
-                             velocity_sensor=s.velocity_sensor, velocity_noise=s.velocity_noise)
+        sensor = sensor_model(scenario)
         warm, duration = scenario.warm_start, scenario.duration
     else:
         raise TypeError(f"scenario = {scenario!r} must be a Scenario, a scenario file path, a PaperExperiment or None")

@@ -785,18 +785,25 @@ def build(scenario: Scenario) -> tuple[Plant, Any]:
     return plant, ctrl
 
 
+def sensor_model(scenario: Scenario) -> SensorModel:
+    """The scenario's sensors as a :class:`~uvms_mj.loop.SensorModel`."""
+    s = scenario.sensors
+    return SensorModel(position_noise=s.position_noise, angle_noise=s.angle_noise,
+                       position_quantum=s.position_quantum, angle_quantum=s.angle_quantum, delay=s.delay,
+                       velocity_sensor=s.velocity_sensor, velocity_noise=s.velocity_noise)
+
+
 def run_scenario(
     scenario: Scenario,
     sink: Callable[[float, dict], None] | None = None,
     on_sample: Callable[[int, int], None] | None = None,
+    built: tuple | None = None,
 ) -> RunResult:
     """Build and run a scenario (:func:`uvms_mj.loop.run_closed_loop`). ``result.meta`` gains
-    ``scenario`` (:func:`resolved`), ``name`` and ``backend``."""
-    plant, ctrl = build(scenario)
-    s = scenario.sensors
-    sensor = SensorModel(position_noise=s.position_noise, angle_noise=s.angle_noise,
-                         position_quantum=s.position_quantum, angle_quantum=s.angle_quantum, delay=s.delay,
-                         velocity_sensor=s.velocity_sensor, velocity_noise=s.velocity_noise)
+    ``scenario`` (:func:`resolved`), ``name`` and ``backend``. ``built``: the (plant,
+    controller) of :func:`build` if the caller built them already (fresh, never run)."""
+    plant, ctrl = built if built is not None else build(scenario)
+    sensor = sensor_model(scenario)
     T = float(getattr(ctrl, "T", controller_period(scenario)))
     res = run_closed_loop(plant, ctrl, scenario.duration, T=T, sensor=sensor, seed=scenario.seed,
                           warm_start=scenario.warm_start, on_sample=on_sample, sink=sink)
