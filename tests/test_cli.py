@@ -94,3 +94,12 @@ def test_sigterm_closes_the_log_cleanly(tmp_path):
     log = read_log(out)
     assert not log.truncated and log.status == "interrupted"
     assert 1.0 < log.t[-1] < 600.0
+
+
+def test_bad_log_files_exit_2(tmp_path):
+    bad = tmp_path / "bad.mcap"
+    bad.write_text("not a log")
+    for cmd in ("info", "render", "plot"):
+        result = CliRunner().invoke(main, [cmd, str(bad)])
+        assert result.exit_code == 2, (cmd, result.output)
+        assert "not a readable uvms-mj MCAP log" in result.output

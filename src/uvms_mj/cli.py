@@ -100,6 +100,18 @@ def _run_one(scenario, out: Path, progress: bool = True):
     return res, out, metrics(res)
 
 
+def _read(path) -> object:
+    """read_log with bad files turned into a usage error (exit 2), never a traceback."""
+    from mcap.exceptions import McapError
+
+    from .recorder import read_log
+
+    try:
+        return read_log(path)
+    except (McapError, OSError, ValueError, KeyError) as exc:
+        raise click.UsageError(f"{path}: not a readable uvms-mj MCAP log ({exc})") from None
+
+
 def _default_log(scenario, out: str | None, controller: str) -> Path:
     if out:
         return Path(out)
@@ -109,10 +121,9 @@ def _default_log(scenario, out: str | None, controller: str) -> Path:
 
 
 def _video(log_path: Path, video_path: Path, scenario=None) -> None:
-    from .recorder import read_log
     from .render import RenderError, render_video
 
-    log = read_log(log_path)
+    log = _read(log_path)
     kw = {}
     if scenario is not None:
         kw = {"fps": scenario.outputs.video_fps, "size": tuple(scenario.outputs.video_size)}
@@ -220,13 +231,13 @@ def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str
 @click.option("--size", type=(int, int), default=(640, 480), show_default=True, help="Width and height [px].")
 def render(log: str, output: str | None, fps: int, size: tuple[int, int]) -> None:
     """Replay LOG's states in MuJoCo and render an MP4 off-screen (no re-simulation)."""
-    from .recorder import read_log
     from .render import RenderError, render_video
 
     out = Path(output) if output else Path(log).with_suffix(".mp4")
+    run_log = _read(log)
     try:
         with _progress(f"render {out.name}", "frame") as tick:
-            info = render_video(read_log(log), out, fps=fps, size=size, on_frame=tick)
+            info = render_video(run_log, out, fps=fps, size=size, on_frame=tick)
     except RenderError as exc:
         click.echo(f"error: {exc}", err=True)
         sys.exit(EXIT_RENDER)
@@ -239,11 +250,10 @@ def render(log: str, output: str | None, fps: int, size: tuple[int, int]) -> Non
 def plot(log: str, out_dir: str | None) -> None:
     """Paper-style time histories (Figs. 5 and 6) and control signals of LOG, as PNG."""
     from .plots import plot_run
-    from .recorder import read_log
 
     folder = Path(out_dir) if out_dir else Path(log).parent
     folder.mkdir(parents=True, exist_ok=True)
-    for p in plot_run(read_log(log), folder, stem=Path(log).stem):
+    for p in plot_run(_read(log), folder, stem=Path(log).stem):
         click.echo(f"plot: {p}")
 
 
@@ -266,9 +276,15 @@ def validate(scenario: str, sets: tuple[str, ...]) -> None:
 @click.argument("log", type=click.Path(exists=True, dir_okay=False))
 def info(log: str) -> None:
     """Metadata, channels and message counts of LOG (and whether it is truncated)."""
+    from mcap.exceptions import McapError
+
     from .recorder import format_info, log_info
 
-    click.echo(format_info(log_info(log)))
+    try:
+        text = format_info(log_info(log))
+    except (McapError, OSError, ValueError, KeyError) as exc:
+        raise click.UsageError(f"{log}: not a readable uvms-mj MCAP log ({exc})") from None
+    click.echo(text)
 
 
 # ------------------------------------------------------------------ without scenario files
