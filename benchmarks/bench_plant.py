@@ -1,78 +1,130 @@
-"""Benchmark: microseconds per physics step, bare MuJoCo vs the full plant on each backend.
+"""Benchmark: microseconds per physics step, bare MuJoCo vs the same model in water.
 
-    python benchmarks/bench_plant.py [--seconds 20] [--repeats 5]
+    python benchmarks/bench_plant.py [--seconds 10] [--repeats 5] [--rollouts 64]
 
-Bare = the same model file stepped by MuJoCo with no hydrodynamics callback (same integrator
-and timestep). Plant = uvms_mj.Plant() with added mass, strip drag and buoyancy, once with the
-pure-Python hydrodynamics (backend="python") and once with their C port (backend="native";
-skipped, with the reason, if it cannot be built). Prints the best of several repeats (the
-machine is shared and noisy: +-30 %), the ratio to bare MuJoCo and the real-time factor
-(simulated seconds per wall-clock second).
+For each robot (the paper's planar robot ``models/scene.xml`` and the 3-D test robot
+``tests/models/robot3d.xml``: a free-floating base with a 4-link arm) and each setting (RK4 at
+the model's step, Euler at 1/600 s), plain ``mujoco.mj_step`` loops on:
+
+* bare: the same model file with the uvms plugins removed (no hydrodynamics);
+* plugin: the model file as it is, the C plugins applying the hydrodynamics;
+* python: the numpy reference through ``mjcb_passive`` (the fallback without a C compiler);
+* (paper robot only) ``Plant.step``: the plant's loop with its divergence checks.
+
+Then ``mujoco.rollout`` of N runs of the 3-D robot (1 s each) on 1 and 2 threads. Prints the
+best of several repeats (the machine is shared: +-30 %), the ratio to bare MuJoCo and the
+real-time factor (simulated seconds per wall-clock second).
 """
 
 from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
 import mujoco
+import numpy as np
+from mujoco import rollout
 
-from uvms_mj import Plant, default_model_path, native
+from uvms_mj import Plant, default_model_path
+from uvms_mj.physics import build, model as pm
+from uvms_mj.physics import python_backend
+
+ROOT = Path(__file__).resolve().parents[1]
+ROBOTS = {"paper (5 dof)": default_model_path(), "robot3d (10 dof)": ROOT / "tests" / "models" / "robot3d.xml"}
 
 
-def time_steps(step, n: int, repeats: int) -> float:
+def best_time(fn, n: int, repeats: int) -> float:
     best = float("inf")
     for _ in range(repeats):
         t0 = time.perf_counter()
-        step(n)
+        fn(n)
         best = min(best, time.perf_counter() - t0)
     return best / n
 
 
+def stepper(m: mujoco.MjModel, d: mujoco.MjData):
+    qvel0 = np.random.default_rng(0).normal(0, 0.2, m.nv)
+
+    def run(k: int) -> None:
+        mujoco.mj_resetData(m, d)
+        d.qvel[:] = qvel0
+        for _ in range(k):
+            mujoco.mj_step(m, d)
+
+    return run
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seconds", type=float, default=20.0, help="simulated seconds per repeat")
+    ap.add_argument("--seconds", type=float, default=10.0, help="simulated seconds per repeat")
     ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--rollouts", type=int, default=64)
     args = ap.parse_args()
-
-    backends = ["python", "native"]
-    if native.load() is None:
-        print(f"native backend unavailable: {native.unavailable_reason()}")
-        backends.remove("native")
+    if not build.register_plugins():
+        raise SystemExit(f"the C plugins are unavailable: {build.unavailable_reason()}")
 
     rows = []
-    for label, integrator, dt in (("default (RK4, 1/120 s)", None, None), ("Euler, 1/600 s", "euler", 1 / 600)):
-        bare_m = mujoco.MjModel.from_xml_path(str(default_model_path()))
-        bare_d = mujoco.MjData(bare_m)
-        n = 0
+    for robot, path in ROBOTS.items():
+        spec = pm.load_spec(path)
+        for label, integrator, dt in (("RK4, model step", None, None), ("Euler, 1/600 s", mujoco.mjtIntegrator.mjINT_EULER, 1 / 600)):
+            models = {"bare": pm.compile_spec(spec, native=False), "plugin": pm.compile_spec(spec, native=True),
+                      "python": pm.compile_spec(spec, native=False)}
+            for m in models.values():
+                if integrator is not None:
+                    m.opt.integrator, m.opt.timestep = integrator, dt
+            h = models["bare"].opt.timestep
+            n = int(round(args.seconds / h))
+            t_bare = None
+            for what, m in models.items():
+                d = mujoco.MjData(m)
+                if what == "python":
+                    served = python_backend.Served(m, d, pm.hydro_of(m))  # noqa: F841 (keeps it served)
+                k = n if what != "python" else max(1, n // 20)
+                t = best_time(stepper(m, d), k, args.repeats if what != "python" else 1)
+                t_bare = t if what == "bare" else t_bare
+                rows.append((robot, label, what, t * 1e6, t / t_bare, h / t))
+            if robot.startswith("paper"):
+                plant = Plant(integrator=None if integrator is None else "euler", timestep=dt)
 
-        def bare(k: int) -> None:
-            for _ in range(k):
-                mujoco.mj_step(bare_m, bare_d)
+                def loop(k: int, plant: Plant = plant) -> None:
+                    plant.reset()
+                    plant.set_state(base_velocity=(0.05, 0.02, 0.1), joint_velocities=(0.3, -0.3))
+                    plant.step(k)
 
-        t_bare = None
-        for backend in backends:
-            plant = Plant(integrator=integrator, timestep=dt, backend=backend)
-            m = plant.model
-            if t_bare is None:
-                n = int(round(args.seconds / m.opt.timestep))
-                bare_m.opt.integrator, bare_m.opt.timestep = m.opt.integrator, m.opt.timestep
-                mujoco.mj_resetDataKeyframe(bare_m, bare_d, 0)
-                t_bare = time_steps(bare, n, args.repeats)
-                rows.append((label, "bare mujoco", t_bare * 1e6, 1.0, m.opt.timestep / t_bare))
+                t = best_time(loop, n, args.repeats)
+                rows.append((robot, label, "Plant.step", t * 1e6, t / t_bare, h / t))
 
-            def full(k: int, plant: Plant = plant) -> None:
-                plant.reset()
-                plant.set_state(base_velocity=(0.05, 0.02, 0.1), joint_velocities=(0.3, -0.3))
-                plant.step(k)
+    print(f"mujoco {mujoco.__version__}; {args.seconds:g} s simulated, best of {args.repeats} "
+          "(python: 1/20 of the steps, once)")
+    print(f"{'robot':<18}{'setting':<17}{'run':<12}{'us/step':>9}{'x bare':>8}{'RTF':>9}")
+    for robot, label, what, us, ratio, rtf in rows:
+        print(f"{robot:<18}{label:<17}{what:<12}{us:>9.2f}{ratio:>8.2f}{rtf:>8.0f}x")
 
-            t_full = time_steps(full, n, args.repeats)
-            rows.append((label, f"plant, {plant.backend}", t_full * 1e6, t_full / t_bare, m.opt.timestep / t_full))
-
-    print(f"mujoco {mujoco.__version__}; {args.seconds:g} s simulated, best of {args.repeats}")
-    print(f"{'setting':<24}{'run':<16}{'us/step':>10}{'x bare':>9}{'RTF':>10}")
-    for label, what, us, ratio, rtf in rows:
-        print(f"{label:<24}{what:<16}{us:>10.2f}{ratio:>9.2f}{rtf:>9.0f}x")
+    # rollout: N runs of 1 s of the 3-D robot from random velocities, 1 vs 2 threads
+    m = pm.compile_spec(pm.load_spec(ROBOTS["robot3d (10 dof)"]), native=True)
+    nstep = int(round(1.0 / m.opt.timestep))
+    rng = np.random.default_rng(1)
+    d = mujoco.MjData(m)
+    size = mujoco.mj_stateSize(m, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    state0 = np.empty((args.rollouts, size))
+    for i in range(args.rollouts):
+        mujoco.mj_resetData(m, d)
+        d.qvel[:] = rng.normal(0, 0.2, m.nv)
+        mujoco.mj_getState(m, d, state0[i], mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    times = {}
+    results = {}
+    for threads in (1, 2):
+        datas = [mujoco.MjData(m) for _ in range(threads)]
+        best = float("inf")
+        for _ in range(args.repeats):
+            t0 = time.perf_counter()
+            results[threads], _ = rollout.rollout(m, datas, state0, nstep=nstep)
+            best = min(best, time.perf_counter() - t0)
+        times[threads] = best
+    same = np.array_equal(results[1], results[2])
+    print(f"rollout of {args.rollouts} x {nstep} steps (robot3d): 1 thread {times[1]:.3f} s, 2 threads "
+          f"{times[2]:.3f} s, speed-up {times[1] / times[2]:.2f}x; results identical: {same}")
 
 
 if __name__ == "__main__":

@@ -60,3 +60,11 @@ def point_jacobian(plant: Plant, d: mujoco.MjData, point: np.ndarray, body: str)
     jacr = np.zeros((3, plant.model.nv))
     mujoco.mj_jac(plant.model, d, jacp, jacr, point, plant.model.body(body).id)
     return jacp[:2], jacr[2:3]
+
+
+@pytest.fixture(scope="session")
+def native_available() -> bool:
+    """Whether the C plugins could be built and registered here (else tests of them skip)."""
+    from uvms_mj.physics import build
+
+    return build.register_plugins()

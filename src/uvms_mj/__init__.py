@@ -14,6 +14,17 @@ from .render import configure_gl as _configure_gl
 
 _configure_gl()
 
+import warnings as _warnings
+
+from .physics import build as _build
+
+# Register the uvms MuJoCo plugins (hydrodynamics, thrusters) with MuJoCo: after this, plain
+# MuJoCo loads and simulates any model file that uses them. Without a C compiler: one line, and
+# uvms_mj's own loaders fall back to the numpy reference (uvms_mj.physics.python_backend).
+if not _build.register_plugins() and _build._mode() != "off":
+    _warnings.warn(f"uvms_mj: the C plugins are unavailable ({_build.unavailable_reason()}); "
+                   "using the numpy reference hydrodynamics (slower)", RuntimeWarning, stacklevel=2)
+
 from .kinematics import ArmGeometry
 from .hydro import HydroModel, HydroTerms, strip_integrals
 from .params import ParameterError, RobotParams, read_params

@@ -2,7 +2,8 @@
 
 Commands: ``run``, ``compare``, ``render``, ``plot``, ``validate``, ``info`` (scenario files
 and logs), ``sweep`` (parameter sweeps, :mod:`uvms_mj.sweep`), ``paper`` (the paper's
-experiment without a scenario file) and ``drift`` (the plant left to itself).
+experiment without a scenario file), ``drift`` (the plant left to itself) and ``view`` (a
+model file in MuJoCo's interactive viewer, in water).
 
 Exit codes: 0 success; 1 unexpected error; 2 bad input (usage, scenario, parameters);
 3 a run diverged (the log is still written, with the reason); 4 rendering unavailable
@@ -478,6 +479,32 @@ def sweep(scenario: str, varies: tuple[str, ...], n: int | None, workers: int | 
         click.echo(f"table: {p}")
     for p in outcome.figures:
         click.echo(f"figure: {p}")
+
+
+@main.command()
+@click.argument("model", default="paper")
+def view(model: str) -> None:
+    """Open MODEL in MuJoCo's interactive viewer, in water (MODEL: an MJCF file or 'paper')."""
+    import os
+
+    from .physics import build
+    from .physics import model as pm
+    from .plant import default_model_path
+
+    path = default_model_path() if model == "paper" else Path(model)
+    if not build.register_plugins():
+        raise click.UsageError(f"the viewer needs the C plugins: {build.unavailable_reason()}")
+    try:
+        m = pm.load_model(path, native=True)
+    except pm.ModelError as exc:
+        raise click.UsageError(str(exc)) from None
+    if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+        click.echo("uvms-mj view needs a display (no DISPLAY or WAYLAND_DISPLAY is set); "
+                   "for video without one use uvms-mj render", err=True)
+        sys.exit(EXIT_RENDER)
+    import mujoco.viewer
+
+    mujoco.viewer.launch(m)
 
 
 if __name__ == "__main__":

@@ -36,10 +36,9 @@ def params_from_file(path: str | Path | None = None) -> RobotParams:
     """Read nominal parameters from a model file (default: the package's models/uvms.xml).
 
     Only the file is read: the nominal model never sees a running plant's parameters."""
-    from .plant import models_dir
+    from .params import compile_robot
 
-    model = mujoco.MjModel.from_xml_path(str(path or (models_dir() / "uvms.xml")))
-    return read_params(model)
+    return read_params(compile_robot(path))
 
 
 @dataclass(frozen=True)

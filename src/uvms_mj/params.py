@@ -177,30 +177,64 @@ def _check_planar(model: mujoco.MjModel) -> None:
             raise ParameterError(f"body {name!r} must lie in the z=0 plane with no rotation")
 
 
+def _strip_coefs(name: str, bh, half: np.ndarray, width: float, center: np.ndarray) -> tuple[float, float]:
+    """(C_Dx, C_Dy) of a body of the planar model from its strips (``uvms.hydro strips``).
+
+    The paper's strips (Eqs. 2-3) lie along the box through its centre: along body x over the
+    box length with C_Dy D for flow along y, and along body y over the box height with C_Dx D
+    for flow along x (D = the box's out-of-plane extent). Strip coefficients for flow along z
+    do not enter planar motion."""
+    cdx = cdy = 0.0
+    for axis, s0, s1, cd1, _cd2 in bh.strips:
+        if axis not in (0, 1):
+            raise ParameterError(f"body {name!r}: the planar model takes strips along x or y only")
+        h = half[axis]
+        if abs(s0 + h) > 1e-12 or abs(s1 - h) > 1e-12:
+            raise ParameterError(f"body {name!r}: a strip along {'xy'[axis]} must span the box "
+                                 f"({-h:g} to {h:g} m), got {s0:g} to {s1:g} m")
+        if axis == 0:
+            cdy = cd1 / width
+        else:
+            cdx = cd1 / width
+    if not np.allclose(bh.pos, [center[0], center[1], 0.0], atol=1e-12, rtol=0):
+        raise ParameterError(f"body {name!r}: the hydrodynamic frame must sit at the box centre {tuple(center)}")
+    return cdx, cdy
+
+
 def read_params(model: mujoco.MjModel) -> RobotParams:
     """Read and validate the robot parameters of a compiled model.
+
+    The hydrodynamic parameters come from the model's ``uvms.water`` and ``uvms.hydro``
+    plugin attributes (:func:`uvms_mj.physics.model.hydro_of`), read as the paper's planar
+    quantities: added mass (Xu, Yv) and added inertia Nr, C_D = strip coefficient / D.
 
     Raises:
         ParameterError: a required element is missing, or a value is non-physical
             (mass <= 0, inertia <= 0, volume < 0, added mass < 0, drag coefficient < 0,
             density <= 0, thruster tau < 0 ...). The message names the parameter.
     """
+    from .physics.model import hydro_of
+
     _check_planar(model)
-    (rho,) = _numeric(model, "water_density", 1)
-    if rho <= 0:
-        raise ParameterError(f"water_density = {rho} kg/m^3 must be > 0")
+    try:
+        info = hydro_of(model)
+    except ValueError as exc:
+        raise ParameterError(str(exc)) from None
+    if info.water is None:
+        raise ParameterError("model has no uvms.water plugin instance (water density, current)")
+    rho = float(info.water.density)
 
     bodies = []
     for name in HYDRO_BODIES:
         b = _id(model, mujoco.mjtObj.mjOBJ_BODY, name, "body")
         g = _id(model, mujoco.mjtObj.mjOBJ_GEOM, name, "geom (box)")
-        s = _id(model, mujoco.mjtObj.mjOBJ_SITE, f"{name}:cob", "site (centre of buoyancy)")
+        if b not in info.bodies:
+            raise ParameterError(f"body {name!r} has no uvms.hydro plugin (its hydrodynamic parameters)")
+        bh = info.bodies[b]
         if model.geom_type[g] != mujoco.mjtGeom.mjGEOM_BOX or model.geom_bodyid[g] != b:
             raise ParameterError(f"geom {name!r} must be a box on body {name!r}")
         if not np.allclose(model.geom_quat[g], (1, 0, 0, 0)):
             raise ParameterError(f"geom {name!r} must not be rotated in its body frame")
-        if model.site_bodyid[s] != b:
-            raise ParameterError(f"site '{name}:cob' must be on body {name!r}")
         mass = float(model.body_mass[b])
         if not mass > 0:
             raise ParameterError(f"{name}.mass = {mass} kg must be > 0")
@@ -209,15 +243,22 @@ def read_params(model: mujoco.MjModel) -> RobotParams:
             raise ParameterError(f"{name}.inertia = {inertia} kg m^2 must be > 0")
         if not np.allclose(model.body_iquat[b], (1, 0, 0, 0)):
             raise ParameterError(f"body {name!r}: principal inertia axes must be the body axes")
-        am = _numeric(model, f"{name}:added_mass", 3)
-        cd = _numeric(model, f"{name}:drag_coef", 2)
-        (vol,) = _numeric(model, f"{name}:volume", 1)
+        if not np.allclose(bh.quat, (1, 0, 0, 0), atol=1e-12, rtol=0):
+            raise ParameterError(f"body {name!r}: the hydrodynamic frame must have the body's axes")
+        ma = np.asarray(bh.added_mass, dtype=float)
+        planar = [(0, 0), (1, 1), (5, 5)]
+        off = [(i, j) for i in range(6) for j in range(6) if (i, j) not in planar and i != j and ma[i, j] != 0.0
+               and (i in (0, 1, 5) or j in (0, 1, 5))]
+        if off:
+            raise ParameterError(f"body {name!r}: the planar model takes a diagonal added mass (Xu, Yv, Nr); "
+                                 f"entry {off[0]} is {ma[off[0]]}")
+        am = (float(ma[0, 0]), float(ma[1, 1]), float(ma[5, 5]))
+        size = model.geom_size[g]
+        cd = _strip_coefs(name, bh, size[:2], float(2 * size[2]), model.geom_pos[g][:2])
+        vol = float(bh.volume)
         for label, vals in (("added_mass", am), ("drag_coef", cd)):
             if min(vals) < 0:
                 raise ParameterError(f"{name}.{label} = {vals} must be >= 0")
-        if vol < 0:
-            raise ParameterError(f"{name}.volume = {vol} m^3 must be >= 0")
-        size = model.geom_size[g]
         bodies.append(
             BodyParams(
                 name=name,
@@ -232,7 +273,7 @@ def read_params(model: mujoco.MjModel) -> RobotParams:
                 added_inertia=am[2],
                 drag_coef=cd,
                 volume=vol,
-                cob=(float(model.site_pos[s][0]), float(model.site_pos[s][1])),
+                cob=(float(bh.cob[0]), float(bh.cob[1])),
             )
         )
     # The arm must be a chain base -> link1 -> link2 with its joints on the link x axes.
@@ -322,60 +363,132 @@ def _vector(key: str, value: Any, size: int) -> np.ndarray:
     return arr
 
 
-def _set_numeric(model: mujoco.MjModel, name: str, values: np.ndarray) -> None:
-    i = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_NUMERIC, name)
-    if i < 0:
-        raise ParameterError(f"model has no <numeric name={name!r}> to override")
-    adr = model.numeric_adr[i]
-    model.numeric_data[adr : adr + len(values)] = values
+def _spec_numeric(spec: mujoco.MjSpec, name: str, values: np.ndarray) -> None:
+    for n in spec.numerics:
+        if n.name == name:
+            n.data = [float(v) for v in values]
+            return
+    raise ParameterError(f"model has no <numeric name={name!r}> to override")
 
 
-def apply_overrides(model: mujoco.MjModel, overrides: Mapping[str, Any]) -> None:
-    """Change parameters of a compiled model in place (then :func:`read_params` re-validates).
+def _box(spec: mujoco.MjSpec, body: str):
+    g = spec.geom(body)
+    if g is None or g.type != mujoco.mjtGeom.mjGEOM_BOX:
+        raise ParameterError(f"model has no box geom named {body!r}")
+    return g
+
+
+def _strips(cdx: float, cdy: float, half: np.ndarray, width: float) -> str:
+    """The paper's strips of a box (see :func:`_strip_coefs`) as a ``uvms.hydro strips`` value."""
+    hx, hy, cdx, cdy, width = (float(v) for v in (half[0], half[1], cdx, cdy, width))
+    parts = []
+    if cdy:
+        parts.append(f"x {-hx!r} {hx!r} {cdy * width!r} 0")
+    if cdx:
+        parts.append(f"y {-hy!r} {hy!r} {cdx * width!r} 0")
+    return "; ".join(parts)
+
+
+def apply_overrides(spec: mujoco.MjSpec, overrides: Mapping[str, Any]) -> None:
+    """Change parameters of a model spec in place, before it is compiled (then
+    :func:`read_params` re-validates the compiled model).
 
     Keys are listed in :data:`OVERRIDE_KEYS`, e.g. ``{"base.volume": 0.03,
-    "link1.added_mass": [1.3, 3.6, 0.11], "thrusters.tau": 0.1}``.
+    "link1.added_mass": [1.3, 3.6, 0.11], "thrusters.tau": 0.1}``. Hydrodynamic keys edit the
+    bodies' ``uvms.hydro`` attributes (added mass (Xu, Yv, Nr); the strips from C_D and the box;
+    volume; centre of buoyancy) and ``water_density`` the ``uvms.water`` density.
 
     Raises:
         ParameterError: unknown key (with the allowed keys) or a value of the wrong shape.
     """
+    from .physics import model as pm
+
+    def positive(label: str, vals: np.ndarray, unit: str, strict: bool) -> None:
+        bad = np.any(vals <= 0) if strict else np.any(vals < 0)
+        if bad:
+            shown = float(vals[0]) if vals.size == 1 else tuple(float(v) for v in vals)
+            raise ParameterError(f"{label} = {shown}{unit} must be {'>' if strict else '>='} 0")
+
     for key, value in overrides.items():
         head, _, field = key.partition(".")
         if key == "water_density":
-            _set_numeric(model, "water_density", _vector(key, value, 1))
+            rho = _vector(key, value, 1)
+            positive("water_density", rho, " kg/m^3", True)
+            pm.set_water(spec, density=pm.fmt(rho))
         elif head in HYDRO_BODIES and field in ("mass", "inertia", "added_mass", "drag_coef", "volume", "cob"):
-            b = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_BODY, head)
+            b = spec.body(head)
+            if b is None:
+                raise ParameterError(f"model has no body named {head!r}")
             if field == "mass":
-                model.body_mass[b] = _vector(key, value, 1)[0]
+                v = _vector(key, value, 1)
+                positive(key, v, " kg", True)
+                b.mass = float(v[0])
             elif field == "inertia":
                 # Out-of-plane inertias follow I_zz, as in the model file.
-                model.body_inertia[b] = _vector(key, value, 1)[0]
+                v = _vector(key, value, 1)
+                positive(key, v, " kg m^2", True)
+                b.inertia = [float(v[0])] * 3
             elif field == "added_mass":
-                _set_numeric(model, f"{head}:added_mass", _vector(key, value, 3))
+                v = _vector(key, value, 3)
+                positive(key, v, "", False)
+                mx, my, ia = v
+                try:
+                    old = [float(v) for v in pm.body_config(spec, head).get("added_mass", "0 0 0 0 0 0").split()]
+                except ValueError:
+                    old = [0.0] * 6
+                diag = old if len(old) == 6 else [0.0] * 6
+                diag[0], diag[1], diag[5] = mx, my, ia
+                pm.set_body(spec, head, added_mass=pm.fmt(diag))
             elif field == "drag_coef":
-                _set_numeric(model, f"{head}:drag_coef", _vector(key, value, 2))
+                v = _vector(key, value, 2)
+                positive(key, v, "", False)
+                cdx, cdy = v
+                g = _box(spec, head)
+                pm.set_body(spec, head, strips=_strips(cdx, cdy, np.asarray(g.size[:2]), 2.0 * float(g.size[2])))
             elif field == "volume":
-                _set_numeric(model, f"{head}:volume", _vector(key, value, 1))
+                v = _vector(key, value, 1)
+                positive(key, v, " m^3", False)
+                pm.set_body(spec, head, volume=pm.fmt(v))
             else:
-                s = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, f"{head}:cob")
-                model.site_pos[s][:2] = _vector(key, value, 2)
-                # The compiler flags a site at its body's origin as "same frame" and then
-                # ignores site_pos; clear the flag so that MuJoCo's site_xpos follows the change.
-                model.site_sameframe[s] = 0
-        elif key == "thrusters.tau":
-            tau = _vector(key, value, 1)[0]
+                x, y = _vector(key, value, 2)
+                pm.set_body(spec, head, cob=pm.fmt([x, y, 0.0]))
+        elif key in ("thrusters.tau", "thrusters.force_range"):
+            vals = _vector(key, value, 1 if key == "thrusters.tau" else 2)
             for name in THRUSTERS:
-                model.actuator_dynprm[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, name)][0] = tau
-        elif key == "thrusters.force_range":
-            rng = _vector(key, value, 2)
-            for name in THRUSTERS:
-                a = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_ACTUATOR, name)
-                model.actuator_forcerange[a] = rng
-                model.actuator_ctrlrange[a] = rng
+                a = spec.actuator(name)
+                if a is None:
+                    raise ParameterError(f"model has no actuator named {name!r}")
+                if key == "thrusters.tau":
+                    prm = list(a.dynprm)
+                    prm[0] = float(vals[0])
+                    a.dynprm = prm
+                else:
+                    a.forcerange = [float(v) for v in vals]
+                    a.ctrlrange = [float(v) for v in vals]
         elif key == "thrusters.dead_zone":
-            _set_numeric(model, "thruster:dead_zone", _vector(key, value, 2))
+            _spec_numeric(spec, "thruster:dead_zone", _vector(key, value, 2))
         else:
             raise ParameterError(
                 f"unknown parameter override {key!r}; allowed: "
                 + ", ".join(k.replace("BODY", "{" + ",".join(HYDRO_BODIES) + "}") for k in OVERRIDE_KEYS)
             )
+
+
+def compile_robot(path: Any = None, overrides: Mapping[str, Any] | None = None, *,
+                  native: bool | None = None) -> mujoco.MjModel:
+    """Load a model file (default: the package's ``models/uvms.xml``), apply parameter
+    overrides (:func:`apply_overrides`) and compile it (C plugins when available).
+
+    Raises:
+        ParameterError: missing file, bad override, or a model that does not compile."""
+    from .physics import model as pm
+    from .plant import models_dir
+
+    path = path if path is not None else models_dir() / "uvms.xml"
+    try:
+        spec = pm.load_spec(path)
+        if overrides:
+            apply_overrides(spec, overrides)
+        return pm.compile_spec(spec, native=native, source=str(getattr(path, "name", path)))
+    except pm.ModelError as exc:
+        raise ParameterError(str(exc)) from None

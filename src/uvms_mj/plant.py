@@ -1,40 +1,38 @@
-"""The plant: the MuJoCo model of the robot with the hydrodynamics installed.
+"""The plant: the MuJoCo model of the robot, in water through the uvms plugins.
 
-``Plant()`` loads ``models/scene.xml`` (robot + scene), validates its parameters and installs
-the closed-form hydrodynamics of :mod:`uvms_mj.hydro` through MuJoCo's ``mjcb_passive``
-callback, so that plain ``mujoco.mj_step`` / ``mujoco.mj_forward`` on ``plant.model`` and
-``plant.data`` include them with every integrator (Euler, implicit, RK4):
+``Plant()`` loads ``models/scene.xml`` (robot + scene). The robot file carries its hydrodynamics
+as attributes of the ``uvms.water`` / ``uvms.hydro`` MuJoCo plugins (``docs/hydrodynamics.md``),
+so plain ``mujoco.mj_step`` / ``mujoco.mj_forward`` on ``plant.model`` and ``plant.data`` (or on
+any other MjData of that model) include them with every integrator (Euler, implicit, RK4):
 
 * the exact added-mass matrix is added to MuJoCo's mass matrix ``d.M`` and refactored
   (no lag, no filter), and
-* the added-mass velocity terms, strip drag and buoyancy are added to ``d.qfrc_passive``.
-
-``mjcb_passive`` is process-global: one dispatcher serves every live plant and leaves
-other models untouched, so several plants (and unrelated MuJoCo models) can live in one
-process. Frames: world X horizontal, Y up; angles counter-clockwise positive.
+* the added-mass velocity terms, damping, strip drag and buoyancy are added to
+  ``d.qfrc_passive``.
 
 Two backends compute the same hydrodynamics (``Plant(backend=...)``, default from
-``$UVMS_MJ_BACKEND``, else "auto"): "python", the closed form of :mod:`uvms_mj.hydro` called
-through a ctypes dispatcher, and "native", its C port (:mod:`uvms_mj.native`) installed as the
-callback itself, several times faster; "auto" takes native when a C compiler can build it.
+``$UVMS_MJ_BACKEND``, else "auto"): "native", the C plugins compiled into the model, and
+"python", the numpy reference (:mod:`uvms_mj.physics.reference`) served through
+``mjcb_passive`` on a copy of the model with the plugins stripped; "auto" takes native when the
+plugin library can be built. Frames: world X horizontal, Y up; angles counter-clockwise positive.
+
+The plant adds to MuJoCo only what a simulation run needs around it: parameter overrides,
+named accessors, thruster commands with the optional dead zone, divergence detection and the
+energy.
 """
 
 from __future__ import annotations
 
-import ctypes
 import math
-import threading
-import warnings
-import weakref
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import mujoco
 import numpy as np
 
-from . import native as _native
-from .hydro import HydroModel, HydroTerms
+from .hydro import HydroTerms
+from .native import BACKENDS, backend_from_env
 from .params import (
     JOINT_MOTORS,
     THRUSTERS,
@@ -44,9 +42,12 @@ from .params import (
     apply_overrides,
     read_params,
 )
+from .physics import build as _build
+from .physics import model as _pm
+from .physics import python_backend as _pyb
+from .physics import reference as _ref
 
 _PKG = Path(__file__).resolve().parent
-
 
 def models_dir() -> Path:
     """Folder holding uvms.xml and scene.xml (the repository's ``models/``, or the packaged copy)."""
@@ -94,128 +95,22 @@ class Energy:
         return self.kinetic + self.potential_gravity + self.potential_buoyancy
 
 
-# --------------------------------------------------------------------------- callback dispatch
-#
-# MuJoCo has ONE process-global mjcb_passive. A plain Python callable would be wrapped by the
-# bindings, which look up the Python MjModel/MjData of every raw pointer and abort with
-# "Python exception raised" for structs they do not know: that breaks every model compiled
-# while a plant is alive (compilation runs the passive stage on a temporary model). We install
-# a ctypes function instead: MuJoCo calls it with raw pointers, and we dispatch on the mjData
-# address to the plant that owns it; every other model and data is left untouched.
-
-_PASSIVE_CFUNC = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_void_p)
-_HANDLERS: dict[int, Callable[[], None]] = {}  # mjData address -> handler
-_PLANT_MODELS: set[int] = set()  # mjModel addresses of live plants
-_FAILURES: dict[int, BaseException] = {}  # mjData address -> first exception in its handler
-_LOCK = threading.RLock()
-_warned_unregistered = False
-
-
-def _dispatch(m_ptr: int | None, d_ptr: int | None) -> None:
-    handler = _HANDLERS.get(d_ptr)  # type: ignore[arg-type]
-    if handler is not None:
-        try:
-            handler()
-        except BaseException as exc:  # noqa: BLE001 - ctypes would print and swallow it
-            # Never let a failed hydrodynamics evaluation pass silently: Plant.step raises it.
-            _FAILURES.setdefault(d_ptr, exc)  # type: ignore[arg-type]
-    elif m_ptr in _PLANT_MODELS:
-        global _warned_unregistered
-        if not _warned_unregistered:
-            _warned_unregistered = True
-            warnings.warn(
-                "an MjData of a uvms_mj plant's model is stepped without hydrodynamics: create "
-                "extra data with Plant.make_data() so that the plant can serve it",
-                RuntimeWarning,
-                stacklevel=1,
-            )
-
-
-_C_DISPATCH = _PASSIVE_CFUNC(_dispatch)
-
-
-# The native backend installs its C function uvms_passive as mjcb_passive instead: it serves its
-# registered mjData itself and calls _C_DISPATCH (set as its fallback) for every other mjData,
-# so Python-backed plants and the unregistered-data warning keep working alongside it.
-_NATIVE_LIB: _native.NativeLib | None = None  # set once a native plant exists
-
-
-def _install_dispatcher(lib: _native.NativeLib | None = None) -> None:
-    """Make mjcb_passive ours: the native callback if ``lib`` is given or already installed,
-    else the Python dispatcher."""
-    global _NATIVE_LIB
-    current = mujoco.get_mjcb_passive()
-    if lib is not None:
-        lib.set_fallback(_C_DISPATCH)
-        _NATIVE_LIB = lib
-    ours = _NATIVE_LIB.passive if _NATIVE_LIB is not None else _C_DISPATCH
-    if current is ours:
-        return
-    if current is not None and current is not _C_DISPATCH:
-        warnings.warn(
-            f"replacing an existing mjcb_passive callback ({current!r}): uvms_mj needs it for "
-            "its hydrodynamics; other models are left untouched",
-            RuntimeWarning,
-            stacklevel=3,
-        )
-    mujoco.set_mjcb_passive(ours)
-
-
-def _register(model: mujoco.MjModel, data: mujoco.MjData, handler: Callable[[], None]) -> None:
-    with _LOCK:
-        _install_dispatcher()
-        _HANDLERS[data._address] = handler
-        _PLANT_MODELS.add(model._address)
-    weakref.finalize(data, _unregister_data, data._address)
-    weakref.finalize(model, _unregister_model, model._address)
-
-
-def _register_native(
-    lib: _native.NativeLib, model: mujoco.MjModel, data: mujoco.MjData, params: _native.Params
-) -> None:
-    with _LOCK:
-        _install_dispatcher(lib)
-        if lib.register(data._address, params) < 0:
-            raise RuntimeError("too many live MjData served by the native hydrodynamics (registry full)")
-        _PLANT_MODELS.add(model._address)  # its unregistered data still get the Python warning
-    # The finalizer holds params alive until the C registry has let go of it.
-    weakref.finalize(data, _unregister_native_data, lib, data._address, params)
-    weakref.finalize(model, _unregister_model, model._address)
-
-
-# Finalizers may run from the garbage collector at any point, even while _LOCK is held by this
-# thread: they take no lock (single dict/set operations are atomic under the GIL).
-def _unregister_data(addr: int) -> None:
-    _HANDLERS.pop(addr, None)
-    _FAILURES.pop(addr, None)
-
-
-def _unregister_native_data(lib: _native.NativeLib, addr: int, params: _native.Params) -> None:
-    lib.unregister(addr)  # lock-free in C
-    _FAILURES.pop(addr, None)
-
-
-def _unregister_model(addr: int) -> None:
-    _PLANT_MODELS.discard(addr)
-
-
-def _resolve_backend(requested: str | None, terms: HydroTerms) -> _native.NativeLib | None:
-    """The native library for the requested backend, or None for the Python backend."""
+def _resolve_backend(requested: str | None, terms: HydroTerms) -> bool:
+    """Whether to use the native (C plugin) backend for the requested one."""
     if requested is None:
         try:
-            requested = _native.backend_from_env()
+            requested = backend_from_env()
         except ValueError as exc:
             raise ParameterError(str(exc)) from None
-    if requested not in _native.BACKENDS:
-        raise ParameterError(f"backend = {requested!r}; allowed: {', '.join(_native.BACKENDS)}")
+    if requested not in BACKENDS:
+        raise ParameterError(f"backend = {requested!r}; allowed: {', '.join(BACKENDS)}")
     if requested == "python" or terms.added_mass == "lagged":  # lagged exists only in Python
-        return None
+        return False
     if requested == "native":
-        return _native.require()
-    lib = _native.load()
-    if lib is None:
-        _native.warn_unavailable_once()
-    return lib
+        if not _build.register_plugins():
+            raise _build.PluginUnavailableError(f"backend 'native': {_build.unavailable_reason()}")
+        return True
+    return _build.register_plugins()
 
 
 # --------------------------------------------------------------------------- plant
@@ -226,24 +121,24 @@ class Plant:
 
     Args:
         model: path of an MJCF file (default: ``models/scene.xml``).
-        overrides: parameter overrides applied to the compiled model, keys as in
+        overrides: parameter overrides applied to the model before it is compiled, keys as in
             :data:`uvms_mj.params.OVERRIDE_KEYS` (e.g. ``{"base.volume": 0.03}``).
         terms: which hydrodynamic terms to apply (:class:`HydroTerms`, all on by default).
         gravity: apply gravity (and therefore buoyancy, which is -rho V g).
-        current: uniform water current (world frame, m/s); default: the model's ``opt.wind``.
+        current: uniform water current (world frame, m/s, 2 or 3 numbers); default: the model's.
         dead_zone: zero thrust commands inside the thrusters' dead zone.
         timestep, integrator: override the model's (e.g. ``integrator="RK4"``).
         max_speed: runaway threshold on sum |q_dot_i| (m/s and rad/s together).
-        backend: "native" (the C hydrodynamics, built on first use), "python" (the reference
-            implementation) or "auto" (native if it can be built, else python with a one-time
-            warning); default: ``$UVMS_MJ_BACKEND``, else "auto". ``added_mass="lagged"``
-            always runs in Python. :attr:`backend` tells which one is in use.
+        backend: "native" (the C plugins, built on first use), "python" (the numpy reference
+            through ``mjcb_passive``) or "auto" (native if it can be built, else python);
+            default: ``$UVMS_MJ_BACKEND``, else "auto". ``added_mass="lagged"`` always runs in
+            Python. :attr:`backend` tells which one is in use.
 
     Raises:
         ParameterError: missing file, missing element, a non-physical parameter or an
             unknown backend.
-        uvms_mj.native.NativeUnavailableError: backend "native" requested but it cannot be
-            built (e.g. no C compiler); the message says why.
+        uvms_mj.physics.build.PluginUnavailableError: backend "native" requested but the
+            plugins cannot be built (e.g. no C compiler); the message says why.
     """
 
     def __init__(
@@ -261,16 +156,38 @@ class Plant:
         backend: str | None = None,
     ) -> None:
         path = Path(model) if model is not None else default_model_path()
-        if not path.is_file():
-            raise ParameterError(f"model file {str(path)!r} does not exist")
+        if not isinstance(terms, HydroTerms):
+            raise ParameterError(f"terms = {terms!r} must be a HydroTerms")
+        if not (max_speed > 0):
+            raise ParameterError(f"max_speed = {max_speed!r} must be > 0")
+        native = _resolve_backend(backend, terms)
         try:
-            self.model = mujoco.MjModel.from_xml_path(str(path))
-        except ValueError as exc:
-            raise ParameterError(f"cannot load model file {str(path)!r}: {exc}") from None
+            spec = _pm.load_spec(path)
+            if overrides:
+                apply_overrides(spec, overrides)
+            if not gravity:
+                spec.option.gravity = [0.0, 0.0, 0.0]
+            if current is not None:
+                cur = np.asarray(current, dtype=float).ravel()
+                if cur.shape not in ((2,), (3,)) or not np.all(np.isfinite(cur)):
+                    raise ParameterError(f"current = {current!r} must be 2 or 3 finite numbers (m/s, world frame)")
+                cur3 = np.zeros(3)
+                cur3[: cur.size] = cur
+                _pm.set_water(spec, current=_pm.fmt(cur3))
+                spec.option.wind = cur3  # MuJoCo's own fluid model (drag="mujoco") sees it too
+            words = ["damping", "froude_krylov"]
+            if terms.added_mass != "off":
+                words.append("added_mass")
+            if terms.drag == "strip":
+                words.append("strips")
+            if terms.buoyancy:
+                words.append("buoyancy")
+            _pm.set_water(spec, terms=" ".join(sorted(words)))
+            self.model = _pm.compile_spec(spec, native=native, source=path.name)
+        except _pm.ModelError as exc:
+            raise ParameterError(str(exc)) from None
         self.model_path = path
         m = self.model
-        if overrides:
-            apply_overrides(m, overrides)
         if timestep is not None:
             if not (math.isfinite(timestep) and timestep > 0):
                 raise ParameterError(f"timestep = {timestep!r} s must be finite and > 0")
@@ -281,20 +198,9 @@ class Plant:
             if key not in names:
                 raise ParameterError(f"integrator = {integrator!r}; allowed: {', '.join(names)}")
             m.opt.integrator = names[key]
-        if not gravity:
-            m.opt.gravity[:] = 0.0
-        if current is not None:
-            cur = np.asarray(current, dtype=float).ravel()
-            if cur.shape not in ((2,), (3,)) or not np.all(np.isfinite(cur)):
-                raise ParameterError(f"current = {current!r} must be 2 finite numbers (m/s, world X and Y)")
-            m.opt.wind[: cur.size] = cur
-        if not (max_speed > 0):
-            raise ParameterError(f"max_speed = {max_speed!r} must be > 0")
-        if not isinstance(terms, HydroTerms):
-            raise ParameterError(f"terms = {terms!r} must be a HydroTerms")
-        self._native_lib = _resolve_backend(backend, terms)
         #: The hydrodynamics backend in use: "native" or "python".
-        self.backend = "native" if self._native_lib is not None else "python"
+        self.backend = "native" if native else "python"
+        self.hydro_info = _pm.hydro_of(m)
 
         self.params: RobotParams = read_params(m)
         self.terms = terms
@@ -311,14 +217,13 @@ class Plant:
         self._thr_lo, self._thr_hi = m.actuator_forcerange[self._thr].T.copy()
         self._tip = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, TIP_SITE)
         self._body_ids = ids(mujoco.mjtObj.mjOBJ_BODY, [b.name for b in self.params.bodies])
-        self._cob_ids = ids(mujoco.mjtObj.mjOBJ_SITE, [f"{b.name}:cob" for b in self.params.bodies])
         if list(m.M_rownnz) != [1, 2, 3, 4, 5] or list(m.M_colind) != [c for r in range(5) for c in range(r + 1)]:
             raise ParameterError("the mass matrix must be dense 5x5 (a planar chain of 5 dofs)")
 
         self._diverged: tuple[float, str] | None = None
-        self._native_state: _native.Params | None = None  # native callback state of self.data
-        self._served: weakref.WeakSet[mujoco.MjData] = weakref.WeakSet()  # data served by this plant
-        self._install()
+        self._serving: dict[int, _pyb.Served] = {}  # Python backend: mjData address -> its server
+        if not native:
+            self._serve(self.data)
         self.reset()
 
     # ---------------------------------------------------------------- hydrodynamics hook
@@ -338,28 +243,26 @@ class Plant:
             m.opt.density = 0.0
             m.opt.viscosity = 0.0
 
-    def _install(self) -> None:
-        terms = self.terms
-        lagged = terms.added_mass == "lagged"
-        # "lagged" evaluates the same exact terms but applies the matrix part explicitly.
-        self.hydro = HydroModel(self.params, replace(terms, added_mass="exact") if lagged else terms)
-        self._attach(self.data)
+    def _serve(self, d: mujoco.MjData) -> None:
+        """Python backend: serve MjData ``d`` with the reference hydrodynamics."""
+        self._serving[d._address] = _pyb.Served(self.model, d, self.hydro_info,
+                                                lagged=self.terms.added_mass == "lagged")
 
     def make_data(self) -> mujoco.MjData:
-        """A new MjData for ``plant.model`` that the plant's hydrodynamics also serve
-        (e.g. for rollouts or a dm_control Physics). Plain ``mujoco.MjData(plant.model)`` is
-        stepped without hydrodynamics (with a one-time RuntimeWarning)."""
+        """A new MjData for ``plant.model``, in water (e.g. for rollouts or a dm_control
+        Physics). With the native backend every MjData of the model is (the plugins are part of
+        the model); with the Python backend the plant registers this one."""
         d = mujoco.MjData(self.model)
-        self._attach(d)
+        if self.backend == "python":
+            self._serve(d)
         return d
 
     def attach_data(self, d: mujoco.MjData) -> mujoco.MjData:
-        """Register an existing MjData of ``plant.model`` with the plant's hydrodynamics and
-        return it (e.g. ``copy.copy(plant.data)``, or the data under a dm_control Physics copy).
+        """Make sure an existing MjData of ``plant.model`` is served by the plant's
+        hydrodynamics and return it (e.g. ``copy.copy(plant.data)``, or the data under a
+        dm_control Physics copy). With the native backend this only checks ``d``.
 
-        ``plant.data`` and data from :meth:`make_data` are served already: attaching them again
-        is a no-op. Only :meth:`step` on ``plant.data`` raises :class:`DivergenceError`; other
-        data are served the same hydrodynamics but their divergence is not tracked.
+        Only :meth:`step` on ``plant.data`` raises :class:`DivergenceError`.
 
         Raises:
             TypeError: ``d`` is not a ``mujoco.MjData``.
@@ -370,67 +273,9 @@ class Plant:
         if d.model is not self.model:
             raise ValueError("attach_data: the MjData must belong to plant.model (create it with "
                              "mujoco.MjData(plant.model) or copy.copy(plant.data))")
-        if d not in self._served:
-            self._attach(d)
+        if self.backend == "python" and d._address not in self._serving:
+            self._serve(d)
         return d
-
-    def _attach(self, d: mujoco.MjData) -> None:
-        """Register the passive-force handler of data ``d``: it adds the exact added-mass
-        matrix to d.M (then refactors it) and the hydrodynamic forces to d.qfrc_passive."""
-        self._served.add(d)
-        if self._native_lib is not None:
-            # The C callback does all of passive() below natively, with its own copy of the
-            # constants and per-data state (added-mass guard, divergence status).
-            params = _native.make_params(self.hydro, self.max_speed)
-            _register_native(self._native_lib, self.model, d, params)
-            if d is self.data:
-                self._native_state = params
-            return
-        m = self.model
-        evaluate = self.hydro.evaluate
-        exact = self.terms.added_mass == "exact"
-        lagged = self.terms.added_mass == "lagged"
-        max_speed = self.max_speed
-        opt = m.opt
-        qpos, qvel, mass, qfrc_passive, qacc = d.qpos, d.qvel, d.M, d.qfrc_passive, d.qacc
-        factor = mujoco.mj_factorM
-        plant_ref = weakref.ref(self)
-        data_ref = weakref.ref(d)
-        state = {"augmented": None}  # d.M[0] right after our last augmentation
-        isfinite = math.isfinite
-
-        def flag(q: list[float], qd: list[float]) -> None:
-            """Record the first divergence of the plant's own data (a callback cannot raise)."""
-            p, dd = plant_ref(), data_ref()
-            if p is not None and dd is p.data and p._diverged is None:
-                finite = all(map(isfinite, q + qd))
-                what = "non-finite state (NaN or inf)" if not finite else (
-                    f"runaway: sum |q_dot| = {sum(map(abs, qd)):.3g} > max_speed = {max_speed:g}")
-                p._diverged = (float(dd.time), what)
-
-        def passive() -> None:
-            q = qpos.tolist()
-            qd = qvel.tolist()
-            # One sum catches NaN, inf and runaway speeds (a NaN makes the comparison false).
-            if not (sum(map(abs, qd)) <= max_speed and isfinite(sum(q))):
-                flag(q, qd)
-                return
-            # mj_forwardSkip (finite differencing) re-enters here with d.M already augmented.
-            want_mass = exact and state["augmented"] != mass[0]
-            madd, qfrc = evaluate(q, qd, opt.wind.tolist()[:2], opt.gravity.tolist()[:2], want_mass or lagged)
-            if want_mass:
-                mass[:] += madd
-                factor(m, data_ref())
-                state["augmented"] = mass[0]
-            elif lagged:
-                # -M_A(q) times the previous step's acceleration as a force, d.M untouched:
-                # the explicit scheme of several peer simulators, kept to show that it diverges.
-                am = np.zeros((5, 5))
-                am[np.tril_indices(5)] = madd
-                qfrc = np.asarray(qfrc) - (am + np.tril(am, -1).T) @ qacc
-            qfrc_passive[:] += qfrc
-
-        _register(m, d, passive)
 
     # ---------------------------------------------------------------- state
 
@@ -445,8 +290,9 @@ class Plant:
                 raise ParameterError(f"model has no keyframe named {keyframe!r}")
             mujoco.mj_resetDataKeyframe(m, d, k)
         self._diverged = None
-        if self._native_state is not None:
-            self._native_state.status = _native.STATUS_OK
+        served = self._serving.get(d._address)
+        if served is not None:
+            served.reset(float(d.time))
         mujoco.mj_forward(m, d)
 
     def set_state(
@@ -558,44 +404,46 @@ class Plant:
         """
         m, d = self.model, self.data
         self._check()
+        self._check_state()
         step = mujoco.mj_step
         t = d.time
-        native = self._native_state
-        if native is not None:
+        served = self._serving.get(d._address)
+        if served is None:
             for _ in range(n):
                 step(m, d)
-                if native.status or _FAILURES or d.time <= t:
+                if d.time <= t:
                     break
                 t = d.time
-            self._sync_native()
         else:
+            advance = served.advance
             for _ in range(n):
                 step(m, d)
-                if self._diverged is not None or _FAILURES or d.time <= t:
+                if d.time <= t or _pyb._FAILURES:
                     break
                 t = d.time
+                advance(t)
         # MuJoCo resets the state itself on a bad qpos/qvel/qacc (and restarts time): never let
         # that pass silently. t is the time at the start of the step that failed.
         for w in (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQVEL, mujoco.mjtWarning.mjWARN_BADQPOS):
             if d.warning[w].number > 0 and self._diverged is None:
                 self._diverged = (float(t), f"non-finite or huge state ({w.name}; MuJoCo reset the state)")
+        self._check_state()
         self._check()
 
-    def _sync_native(self) -> None:
-        """Turn the native callback's divergence status of self.data into ``_diverged``
-        (the same record as the Python handler's ``flag``)."""
-        st = self._native_state
-        if st is None or not st.status or self._diverged is not None:
+    def _check_state(self) -> None:
+        """Record a divergence of the current state (non-finite, or sum |q_dot| > max_speed)."""
+        if self._diverged is not None:
             return
-        if st.status == _native.STATUS_NONFINITE:
-            what = "non-finite state (NaN or inf)"
-        else:
-            what = f"runaway: sum |q_dot| = {st.status_speed:.3g} > max_speed = {self.max_speed:g}"
-        self._diverged = (float(st.status_time), what)
+        d = self.data
+        speed = float(np.abs(d.qvel).sum())
+        if not (speed <= self.max_speed and math.isfinite(float(d.qpos.sum()))):
+            finite = bool(np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel)))
+            what = "non-finite state (NaN or inf)" if not finite else (
+                f"runaway: sum |q_dot| = {speed:.3g} > max_speed = {self.max_speed:g}")
+            self._diverged = (float(d.time), what)
 
     def _check(self) -> None:
-        self._sync_native()
-        exc = _FAILURES.pop(self.data._address, None)
+        exc = _pyb.failure(self.data)
         if exc is not None:
             raise RuntimeError(f"the hydrodynamics callback failed at t = {self.time:.4f} s: {exc!r}") from exc
         if self._diverged is not None:
@@ -608,22 +456,25 @@ class Plant:
         m, d, s = self.model, self.data, self._scratch
         s.qpos[:] = d.qpos
         s.qvel[:] = d.qvel
-        mujoco.mj_fwdPosition(m, s)  # builds the rigid mass matrix only (no passive callback)
+        s.time = d.time
+        mujoco.mj_fwdPosition(m, s)  # the rigid mass matrix (the passive stage is not run)
+        mujoco.mj_comVel(m, s)
         mq = np.zeros(m.nv)
         mujoco.mj_mulM(m, s, mq, s.qvel)
         rigid = 0.5 * float(s.qvel @ mq)
-        added = (
-            self.hydro.added_kinetic_energy(d.qpos.tolist(), d.qvel.tolist(), tuple(m.opt.wind[:2]))
-            if self.terms.added_mass != "off"
-            else 0.0
-        )
+        info = self.hydro_info
+        served = self._serving.get(d._address)
+        state = served.current_state if served is not None else _pm.current_state_of(m, d)
+        added = (_ref.added_kinetic_energy(m, s, info.water, info.bodies, current_state=state)
+                 if self.terms.added_mass != "off" else 0.0)
         g = m.opt.gravity
         pot_g = -sum(m.body_mass[b] * float(g @ s.xipos[b]) for b in self._body_ids)
-        pot_b = (
-            sum(self.params.rho * bp.volume * float(g @ s.site_xpos[c]) for bp, c in zip(self.params.bodies, self._cob_ids))
-            if self.terms.buoyancy
-            else 0.0
-        )
+        pot_b = 0.0
+        if self.terms.buoyancy:
+            rho = float(info.water.density)
+            for b, bh in info.bodies.items():
+                cob = s.xpos[b] + s.xmat[b].reshape(3, 3) @ np.asarray(bh.cob, dtype=float)
+                pot_b += rho * float(bh.volume) * float(g @ cob)
         return Energy(rigid, added, float(pot_g), float(pot_b))
 
     def mass_matrix(self) -> np.ndarray:

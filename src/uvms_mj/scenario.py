@@ -92,7 +92,7 @@ from .controllers import ControllerError, available, create
 from .hydro import HydroTerms
 from .loop import RunResult, SensorModel, run_closed_loop
 from .nominal import NominalModel
-from .params import HYDRO_BODIES, OVERRIDE_KEYS, ParameterError, RobotParams, apply_overrides, read_params
+from .params import HYDRO_BODIES, OVERRIDE_KEYS, ParameterError, RobotParams, compile_robot, read_params
 from .plant import Plant, default_model_path, models_dir
 from .trajectory import StraightLine
 
@@ -140,13 +140,13 @@ class _Issues(ValueError):
 @lru_cache(maxsize=1)
 def _plant_model() -> mujoco.MjModel:
     """The default plant model (compiled once; callers copy it before changing it)."""
-    return mujoco.MjModel.from_xml_path(str(default_model_path()))
+    return compile_robot(default_model_path())
 
 
 @lru_cache(maxsize=1)
 def _robot_file_model() -> mujoco.MjModel:
     """The robot model file the nominal model is read from (compiled once; copy before use)."""
-    return mujoco.MjModel.from_xml_path(str(models_dir() / "uvms.xml"))
+    return compile_robot(models_dir() / "uvms.xml")
 
 
 @lru_cache(maxsize=1)
@@ -218,10 +218,8 @@ def _check_overrides(overrides: dict, allow_thrusters: bool) -> list[tuple[tuple
         if _non_finite(value):
             issues.append(((key,), "must be finite", value))
             continue
-        m = copy.deepcopy(_robot_file_model())
         try:
-            apply_overrides(m, {key: value})
-            read_params(m)
+            read_params(compile_robot(models_dir() / "uvms.xml", {key: value}))
         except ParameterError as exc:
             issues.append(((key,), f"{exc} ({OVERRIDE_KEYS[_generic(key)]})", value))
     return issues
@@ -707,10 +705,9 @@ def plant_overrides(scenario: Scenario) -> dict:
 
 def nominal_params(scenario: Scenario) -> RobotParams:
     """The controller's parameters: the robot model FILE plus nominal.overrides (never the plant)."""
-    m = copy.deepcopy(_robot_file_model())
-    if scenario.nominal.overrides:
-        apply_overrides(m, scenario.nominal.overrides)
-    return read_params(m)
+    if not scenario.nominal.overrides:
+        return read_params(_robot_file_model())
+    return read_params(compile_robot(models_dir() / "uvms.xml", scenario.nominal.overrides))
 
 
 def log_path(scenario: Scenario) -> Path:

@@ -799,8 +799,9 @@ class _Bases:
         return self.cache[controller]
 
     def value(self, controller: str, path: str) -> Any:
-        from .params import apply_overrides, read_params
-        from .scenario import _robot_file_model, nominal_params, plant_overrides
+        from .params import compile_robot, read_params
+        from .plant import models_dir
+        from .scenario import nominal_params, plant_overrides
 
         sc, res, memo = self.scenario(controller)
         parts = path.split(".")
@@ -813,9 +814,7 @@ class _Bases:
                 if parts[0] == "nominal":
                     memo["nominal"] = nominal_params(sc)
                 else:
-                    m = copy.deepcopy(_robot_file_model())
-                    apply_overrides(m, plant_overrides(sc))
-                    memo["plant"] = read_params(m)
+                    memo["plant"] = read_params(compile_robot(models_dir() / "uvms.xml", plant_overrides(sc)))
             return _override_value(memo[parts[0]], name)
         node: Any = res
         for p in parts:

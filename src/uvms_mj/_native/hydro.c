@@ -1,7 +1,8 @@
 /*
- * Native hydrodynamics of the uvms_mj plant: a line-by-line C port of
- * HydroModel.evaluate() in src/uvms_mj/hydro.py (the pure-Python reference, which stays the
- * ground truth and the fallback) plus a MuJoCo mjcb_passive callback that applies it.
+ * The planar closed-form hydrodynamics of the paper's robot in C: a line-by-line port of
+ * HydroModel.evaluate() in src/uvms_mj/hydro.py, used by the controller's nominal model
+ * (uvms_mj.nominal) for speed. The PLANT's hydrodynamics are the MuJoCo plugins in
+ * src/uvms_mj/physics/plugin/ (any robot); this file serves only the planar nominal model.
  *
  * Same maths, same formulas, same order of floating-point operations (compiled without
  * -ffast-math and with -ffp-contract=off, so results match the Python reference to the last
@@ -15,35 +16,19 @@
  *
  * No model numbers live here: every constant comes from Python (RobotParams -> HydroModel
  * ._bodies) through uvms_params, whose layout is mirrored by uvms_mj.native.Params.
- *
- * The callback. MuJoCo has one process-global mjcb_passive. uvms_passive() looks the mjData
- * up in a small lock-free registry of (mjData*, uvms_params*) pairs filled from Python:
- *   - registered data: divergence check (records a status in its uvms_params and leaves d
- *     alone), exact added mass into d->M + mj_factorM (guarded against mj_forwardSkip
- *     re-entering with d->M already augmented), forces into d->qfrc_passive;
- *   - any other data: calls the fallback (the Python ctypes dispatcher of uvms_mj.plant,
- *     which serves Python-backed plants and warns about unregistered data of plant models).
- * Wind (water current) and gravity are read from m->opt on every call.
  */
 
 #include <math.h>
 #include <stddef.h>
 
-#include <mujoco/mujoco.h>
 
 #define UVMS_NV 5            /* q = (p0x, p0y, phi0, phi1, phi2) */
 #define UVMS_NM 15           /* lower triangle of the 5x5 mass matrix */
 #define UVMS_MAXBODY 3       /* base, link1, link2 */
 #define UVMS_NB 16           /* constants per body, as in HydroModel._bodies */
-#define UVMS_MAXDATA 4096    /* registry capacity (live registered mjData) */
 
-/* Divergence status (uvms_params.status). */
-#define UVMS_OK 0
-#define UVMS_RUNAWAY 1
-#define UVMS_NONFINITE 2
-
-/* Parameters and per-data state of one registered mjData. Mirrored by
- * uvms_mj.native.Params (ctypes): keep the two in the same order. */
+/* Parameters of one model. Mirrored by uvms_mj.native.Params (ctypes): keep the two in the
+ * same order. */
 typedef struct {
   /* Per body, in chain order, exactly HydroModel._bodies:
    * jx, jy, cx, cy, mx, my, ia, kx, ky, xa, xb, ya, yb, rhov, bx, by */
@@ -52,25 +37,15 @@ typedef struct {
   int exact;              /* added mass "exact": matrix into d->M, velocity terms */
   int strip;              /* drag "strip" */
   int buoyancy;           /* buoyancy on */
-  double max_speed;       /* runaway threshold on sum |qd| */
-  /* state, written by the callback */
-  int augmented_valid;    /* augmented holds a value */
-  double augmented;       /* d->M[0] right after the last augmentation */
-  int status;             /* UVMS_OK / UVMS_RUNAWAY / UVMS_NONFINITE (first one kept) */
-  double status_time;     /* d->time when status was set */
-  double status_speed;    /* sum |qd| then (for the message) */
 } uvms_params;
 
 /* Layout check for the ctypes mirror: sizeof(uvms_params) and the offsets of its fields
- * nbody, max_speed, augmented, status, status_time, status_speed (7 numbers). */
+ * nbody, exact, buoyancy (4 numbers). */
 void uvms_params_layout(size_t* out) {
   out[0] = sizeof(uvms_params);
   out[1] = offsetof(uvms_params, nbody);
-  out[2] = offsetof(uvms_params, max_speed);
-  out[3] = offsetof(uvms_params, augmented);
-  out[4] = offsetof(uvms_params, status);
-  out[5] = offsetof(uvms_params, status_time);
-  out[6] = offsetof(uvms_params, status_speed);
+  out[2] = offsetof(uvms_params, exact);
+  out[3] = offsetof(uvms_params, buoyancy);
 }
 
 /* ------------------------------------------------------------------ strip integrals */
@@ -249,123 +224,4 @@ void uvms_evaluate(const uvms_params* p, const double* q, const double* qd, cons
       Q[2 + k] += tq + (ox - pvx[k]) * fy - (oy - pvy[k]) * fx;
     }
   }
-}
-
-/* ------------------------------------------------------------------ registry */
-
-/* Slot i is free when p == NULL. Claimed by CAS on p, published by storing d (release), so a
- * lookup that sees d also sees p; cleared d first, then p. Lock-free: unregister may be
- * called from a Python finalizer (garbage collector) at any time. */
-typedef struct {
-  mjData* d;
-  uvms_params* p;
-} uvms_slot;
-
-static uvms_slot registry[UVMS_MAXDATA];
-static int registry_high = 0; /* slots [0, registry_high) may be in use */
-static mjfGeneric fallback = NULL;
-
-/* Register data d with its parameters p (kept alive by the caller until unregistered).
- * Returns the slot index, or -1 when the registry is full. */
-int uvms_register(mjData* d, uvms_params* p) {
-  for (int i = 0; i < UVMS_MAXDATA; i++) {
-    uvms_params* expected = NULL;
-    if (__atomic_compare_exchange_n(&registry[i].p, &expected, p, 0, __ATOMIC_ACQ_REL,
-                                    __ATOMIC_RELAXED)) {
-      __atomic_store_n(&registry[i].d, d, __ATOMIC_RELEASE);
-      int high = __atomic_load_n(&registry_high, __ATOMIC_ACQUIRE);
-      while (high < i + 1 &&
-             !__atomic_compare_exchange_n(&registry_high, &high, i + 1, 0, __ATOMIC_ACQ_REL,
-                                          __ATOMIC_ACQUIRE)) {
-      }
-      return i;
-    }
-  }
-  return -1;
-}
-
-/* Unregister data d (no-op if it is not registered). Returns 1 if it was. */
-int uvms_unregister(mjData* d) {
-  int high = __atomic_load_n(&registry_high, __ATOMIC_ACQUIRE);
-  for (int i = 0; i < high; i++) {
-    if (__atomic_load_n(&registry[i].d, __ATOMIC_ACQUIRE) == d) {
-      __atomic_store_n(&registry[i].d, NULL, __ATOMIC_RELEASE);
-      __atomic_store_n(&registry[i].p, NULL, __ATOMIC_RELEASE);
-      return 1;
-    }
-  }
-  return 0;
-}
-
-/* Number of registered data (for tests). */
-int uvms_registered_count(void) {
-  int n = 0, high = __atomic_load_n(&registry_high, __ATOMIC_ACQUIRE);
-  for (int i = 0; i < high; i++) {
-    if (__atomic_load_n(&registry[i].d, __ATOMIC_ACQUIRE) != NULL) n++;
-  }
-  return n;
-}
-
-/* The callback for data that is not registered here (NULL: none). */
-void uvms_set_fallback(mjfGeneric f) {
-  __atomic_store_n(&fallback, f, __ATOMIC_RELEASE);
-}
-
-static uvms_params* lookup(const mjData* d) {
-  int high = __atomic_load_n(&registry_high, __ATOMIC_ACQUIRE);
-  for (int i = 0; i < high; i++) {
-    if (__atomic_load_n(&registry[i].d, __ATOMIC_ACQUIRE) == d) {
-      return __atomic_load_n(&registry[i].p, __ATOMIC_ACQUIRE); /* NULL if just cleared */
-    }
-  }
-  return NULL;
-}
-
-/* ------------------------------------------------------------------ the callback */
-
-/* Mirrors the passive() handler of Plant._attach (plant.py). */
-void uvms_passive(const mjModel* m, mjData* d) {
-  uvms_params* p = lookup(d);
-  if (!p) {
-    mjfGeneric f = __atomic_load_n(&fallback, __ATOMIC_ACQUIRE);
-    if (f) f(m, d);
-    return;
-  }
-  if (m->nv != UVMS_NV || m->nC != UVMS_NM) return; /* not the planar chain (cannot happen) */
-
-  const double* q = d->qpos;
-  const double* qd = d->qvel;
-  /* One sum catches NaN, inf and runaway speeds (a NaN makes the comparison false). */
-  double speed = 0.0, qsum = 0.0;
-  for (int k = 0; k < UVMS_NV; k++) {
-    speed += fabs(qd[k]);
-    qsum += q[k];
-  }
-  if (!(speed <= p->max_speed && isfinite(qsum))) {
-    if (p->status == UVMS_OK) { /* record the first divergence; a callback cannot raise */
-      int finite = 1;
-      for (int k = 0; k < UVMS_NV; k++) finite = finite && isfinite(q[k]) && isfinite(qd[k]);
-      p->status_time = d->time;
-      p->status_speed = speed;
-      p->status = finite ? UVMS_RUNAWAY : UVMS_NONFINITE;
-    }
-    return;
-  }
-
-  double wind[2] = {m->opt.wind[0], m->opt.wind[1]};
-  double gravity[2] = {m->opt.gravity[0], m->opt.gravity[1]};
-  double Q[UVMS_NV];
-  double madd[UVMS_NM] = {0.0};
-  /* mj_forwardSkip (finite differencing) re-enters here with d->M already augmented. */
-  int want_mass = p->exact && !(p->augmented_valid && p->augmented == d->M[0]);
-  uvms_evaluate(p, q, qd, wind, gravity, want_mass ? madd : NULL, Q);
-  if (want_mass) {
-    /* The mass matrix of the planar chain is dense (checked by Plant): its CSR lower
-     * triangle is exactly the 15-vector. Summed first, then added, as in plant.py. */
-    for (int k = 0; k < UVMS_NM; k++) d->M[k] += madd[k];
-    mj_factorM(m, d);
-    p->augmented = d->M[0];
-    p->augmented_valid = 1;
-  }
-  for (int k = 0; k < UVMS_NV; k++) d->qfrc_passive[k] += Q[k];
 }

@@ -1,0 +1,214 @@
+"""Build and register the uvms MuJoCo plugins (``plugin/*.c``: ``uvms.water``, ``uvms.hydro``,
+``uvms.thruster``).
+
+All ``plugin/*.c`` files are compiled into ONE shared library with the system C compiler
+(``$CC``, else ``cc``, ``gcc`` or ``clang``; ``-O2 -shared -fPIC -ffp-contract=off``) against the
+headers and the ``libmujoco`` of the installed mujoco wheel, into a cache folder:
+``$UVMS_MJ_CACHE``, else ``$XDG_CACHE_HOME/uvms_mj``, else ``~/.cache/uvms_mj``. The file name
+carries a hash of every source and header, the mujoco version and library, the platform and the
+compiler command, so a change of any of them rebuilds; the build writes a temporary file that is
+renamed into place, so parallel processes are safe (they may both compile; each rename is
+atomic and the result is the same).
+
+:func:`register_plugins` loads the library into MuJoCo (``mujoco.mj_loadPluginLibrary``) once
+per process. ``UVMS_MJ_PLUGIN=off`` (default ``auto``) never builds nor loads it: for testing the
+pure-Python fallback.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import os
+import shlex
+import shutil
+import subprocess
+import sys
+import sysconfig
+import tempfile
+import threading
+from pathlib import Path
+
+import mujoco
+
+__all__ = [
+    "ENV_CACHE",
+    "ENV_PLUGIN",
+    "PluginUnavailableError",
+    "cache_dir",
+    "compile_library",
+    "library_path",
+    "register_plugins",
+    "sources",
+    "unavailable_reason",
+]
+
+ENV_CACHE = "UVMS_MJ_CACHE"
+ENV_PLUGIN = "UVMS_MJ_PLUGIN"
+PLUGIN_MODES = ("auto", "off")
+PLUGIN_DIR = Path(__file__).resolve().parent / "plugin"
+CFLAGS = ("-O2", "-shared", "-fPIC", "-ffp-contract=off")  # no FMA contraction: reproducible maths
+
+
+class PluginUnavailableError(RuntimeError):
+    """The plugin library cannot be built or loaded (the message is a one-line reason)."""
+
+
+def sources() -> list[Path]:
+    """The C sources compiled into the library (sorted)."""
+    return sorted(PLUGIN_DIR.glob("*.c"))
+
+
+def _headers() -> list[Path]:
+    return sorted(PLUGIN_DIR.glob("*.h"))
+
+
+def cache_dir() -> Path:
+    """Where the library goes: $UVMS_MJ_CACHE, $XDG_CACHE_HOME/uvms_mj or ~/.cache/uvms_mj."""
+    if os.environ.get(ENV_CACHE):
+        return Path(os.environ[ENV_CACHE]).expanduser()
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base).expanduser() / "uvms_mj"
+
+
+def _mujoco_paths() -> tuple[Path, Path]:
+    """(include folder, libmujoco) of the installed mujoco wheel."""
+    pkg = Path(mujoco.__file__).resolve().parent
+    include = pkg / "include"
+    if not (include / "mujoco" / "mjplugin.h").is_file():
+        raise PluginUnavailableError(f"no MuJoCo headers at {include}/mujoco (is mujoco installed from a wheel?)")
+    libs = sorted(pkg.glob("libmujoco.so*")) + sorted(pkg.glob("libmujoco*.dylib"))
+    if not libs:
+        raise PluginUnavailableError(f"no libmujoco in {pkg}")
+    return include, max(libs, key=lambda p: len(p.name))  # the fully versioned name
+
+
+def _compiler() -> list[str]:
+    if os.environ.get("CC"):
+        cc = shlex.split(os.environ["CC"])
+        if cc and shutil.which(cc[0]):
+            return cc
+        raise PluginUnavailableError(f"the C compiler CC={os.environ['CC']!r} is not found")
+    for name in ("cc", "gcc", "clang"):
+        found = shutil.which(name)
+        if found:
+            return [found]
+    raise PluginUnavailableError("no C compiler found (Debian: apt-get install gcc; or set CC)")
+
+
+def library_path(force: bool = False) -> Path:
+    """The compiled plugin library, built into the cache first if needed.
+
+    Raises:
+        PluginUnavailableError: unsupported platform, no compiler, no MuJoCo headers, an
+            unwritable cache folder, or a failed compilation (one-line reason).
+    """
+    srcs = sources()
+    if not srcs:
+        raise PluginUnavailableError(f"no plugin sources in {PLUGIN_DIR}")
+    return compile_library("uvms_plugins", srcs, headers=_headers(), force=force)
+
+
+def compile_library(stem: str, srcs: list[Path], *, headers: list[Path] = (), force: bool = False) -> Path:
+    """Compile C sources into one shared library in the cache (if not there yet) and return its
+    path: ``STEM-HASH.so``, the hash over the sources, headers, mujoco version and library,
+    platform and compiler command (built against the mujoco wheel's headers, linked to its
+    libmujoco). Written to a temporary name and renamed: parallel builds are safe.
+
+    Raises:
+        PluginUnavailableError: unsupported platform, no compiler, no MuJoCo headers, an
+            unwritable cache folder, or a failed compilation (one-line reason).
+    """
+    if sys.platform.startswith("win"):
+        raise PluginUnavailableError("building the uvms C code is not supported on Windows")
+    include, libmujoco = _mujoco_paths()
+    cc = _compiler()
+    dirs = sorted({str(p.parent) for p in [*srcs, *headers]})
+    cmd_tail = [*CFLAGS, f"-I{include}", *(f"-I{d}" for d in dirs), *map(str, srcs), str(libmujoco),
+                f"-Wl,-rpath,{libmujoco.parent}", "-lm"]
+    h = hashlib.sha256()
+    for path in [*srcs, *headers]:
+        h.update(path.name.encode() + b"\0" + path.read_bytes() + b"\0")
+    for part in (mujoco.__version__, str(libmujoco), sysconfig.get_platform(), " ".join(cc + cmd_tail)):
+        h.update(part.encode() + b"\0")
+    key = h.hexdigest()[:20]
+    folder = cache_dir()
+    suffix = ".dylib" if sys.platform == "darwin" else ".so"
+    target = folder / f"{stem}-{key}{suffix}"
+    if target.is_file() and not force:
+        return target
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{stem}-", suffix=suffix + ".tmp", dir=folder)
+        os.close(fd)
+    except OSError as exc:
+        raise PluginUnavailableError(f"cannot write to the cache folder {folder} ({exc}; set {ENV_CACHE})") from None
+    try:
+        try:
+            res = subprocess.run([*cc, *cmd_tail, "-o", tmp], capture_output=True, text=True, timeout=300)
+        except (OSError, subprocess.SubprocessError) as exc:
+            raise PluginUnavailableError(f"cannot run the C compiler {cc[0]}: {exc}") from None
+        if res.returncode != 0:
+            detail = [ln for ln in (res.stderr or res.stdout).strip().splitlines() if ln.strip()][-4:]
+            raise PluginUnavailableError(f"compiling {', '.join(p.name for p in srcs)} with {cc[0]} failed: "
+                                         + " | ".join(detail))
+        os.chmod(tmp, 0o755)
+        os.replace(tmp, target)  # atomic: a parallel process sees no file or a complete one
+    finally:
+        if os.path.exists(tmp):
+            os.unlink(tmp)
+    return target
+
+
+_lock = threading.Lock()
+_registered: bool | None = None  # None: not tried yet
+_reason: str | None = None
+_path: Path | None = None
+
+
+def _mode() -> str:
+    return (os.environ.get(ENV_PLUGIN, "").strip().lower() or "auto")
+
+
+def register_plugins() -> bool:
+    """Build (if needed) and load the plugin library into MuJoCo, once per process.
+
+    Returns True when ``uvms.water``, ``uvms.hydro`` and ``uvms.thruster`` are registered; False
+    (and :func:`unavailable_reason` says why) when it cannot build or load, or when
+    ``UVMS_MJ_PLUGIN=off``. Idempotent and thread-safe; the outcome is cached for the process.
+    """
+    global _registered, _reason, _path
+    with _lock:
+        if _registered is not None:
+            return _registered
+        mode = _mode()
+        if mode not in PLUGIN_MODES:
+            _registered, _reason = False, f"{ENV_PLUGIN}={os.environ.get(ENV_PLUGIN)!r} is not one of {', '.join(PLUGIN_MODES)}"
+            return False
+        if mode == "off":
+            _registered, _reason = False, f"disabled by {ENV_PLUGIN}=off"
+            return False
+        try:
+            path = library_path()
+            try:
+                mujoco.mj_loadPluginLibrary(str(path))
+            except Exception:  # a damaged cache file: rebuild once
+                path = library_path(force=True)
+                mujoco.mj_loadPluginLibrary(str(path))
+        except PluginUnavailableError as exc:
+            _registered, _reason = False, str(exc)
+            return False
+        except Exception as exc:  # loading failed twice
+            _registered, _reason = False, f"cannot load the uvms plugin library: {exc}".replace("\n", " ")
+            return False
+        _registered, _reason, _path = True, None, path
+        return True
+
+
+def unavailable_reason() -> str | None:
+    """Why :func:`register_plugins` returned False (None if not tried or registered)."""
+    return _reason
+
+
+def loaded_path() -> Path | None:
+    """The library registered in this process (None if none)."""
+    return _path
