@@ -16,7 +16,7 @@ from typing import Callable
 import numpy as np
 
 from .controllers.base import Command, Controller, Measurement
-from .plant import DivergenceError, Plant
+from .plant import DivergenceError, Plant, mujoco_warnings
 
 
 #: A thrust or joint-torque command beyond this [N, N m] is taken as divergence of the
@@ -118,6 +118,7 @@ def run_closed_loop(
     times: list[float] = []
     status, reason = "ok", ""
     q_prev_meas = None
+    mujoco_warnings(clear=True)  # only this run's
 
     att_noise = sensor.angle_noise if sensor.attitude_noise is None else sensor.attitude_noise
     joint_noise = sensor.angle_noise if sensor.joint_noise is None else sensor.joint_noise
@@ -179,5 +180,10 @@ def run_closed_loop(
             status, reason = "diverged", str(exc)
             break
     signals = {key: np.asarray(v) for key, v in rec.items()}
-    return RunResult(t=np.asarray(times), signals=signals, status=status, reason=reason,
-                     meta={"T": T, "dt": dt, "seed": seed, "controller": controller.name})
+    meta = {"T": T, "dt": dt, "seed": seed, "controller": controller.name}
+    warned = mujoco_warnings(clear=True)
+    if warned:
+        meta["mujoco_warnings"] = warned
+        if status != "ok":
+            reason = f"{reason}; MuJoCo warning: {warned[0]}"
+    return RunResult(t=np.asarray(times), signals=signals, status=status, reason=reason, meta=meta)
