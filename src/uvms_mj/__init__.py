@@ -9,6 +9,16 @@ underwater robot with 2 link manipulator": a floating base with 3 thrusters carr
     >>> plant.step(120)          # 1 s at the default 1/120 s step (RK4)
 """
 
+import os as _os
+import sys as _sys
+
+if _sys.argv and _os.path.basename(_sys.argv[0]) == "uvms-mj":
+    # The command line: Ctrl-C while the imports run (before any output) exits 130 quietly
+    # instead of with a KeyboardInterrupt traceback; cli.main puts Python's handler back.
+    import signal as _signal
+
+    _signal.signal(_signal.SIGINT, lambda *_: (_sys.stderr.write("interrupted\n"), _os._exit(130)))
+
 # Choose a headless OpenGL backend (MUJOCO_GL) before anything imports mujoco; see render.py.
 from .render import configure_gl as _configure_gl
 

@@ -14,6 +14,7 @@ disk; the message names the file); 130 interrupted (Ctrl-C or SIGTERM; the log i
 from __future__ import annotations
 
 import sys
+import threading
 from pathlib import Path
 
 import click
@@ -61,6 +62,10 @@ class _Group(click.Group):
     click's "Aborted!" with 1."""
 
     def make_context(self, *args, **kwargs):  # noqa: ANN002, ANN003
+        import signal
+
+        if threading.current_thread() is threading.main_thread():
+            signal.signal(signal.SIGINT, signal.default_int_handler)  # see uvms_mj/__init__.py
         try:
             return super().make_context(*args, **kwargs)
         except KeyboardInterrupt:

@@ -573,7 +573,7 @@ def check_output_path(path: str | os.PathLike, protect: tuple = (), kind: str = 
                       magic: bytes | None = b"\x89MCAP") -> Path:
     """Refuse an output path that would fail or destroy something, before anything is written.
 
-    Refused: a path under /proc, /sys or /dev; a symbolic link; an existing directory, device
+    Refused: a path under /proc, /sys or /dev (except /dev/shm); a symbolic link; an existing directory, device
     or other non-regular file; an existing non-empty file that does not start with ``magic``
     (not one of our outputs: never overwritten); a file in ``protect`` (e.g. the scenario
     file); a parent that is a file or is not writable; a name longer than the file system
@@ -582,6 +582,8 @@ def check_output_path(path: str | os.PathLike, protect: tuple = (), kind: str = 
     p = Path(path)
     absolute = Path(os.path.abspath(p))
     for root in _NO_WRITE_ROOTS:
+        if Path("/dev/shm") in absolute.parents:  # a tmpfs: fine
+            break
         if absolute == Path(root) or Path(root) in absolute.parents:
             raise OutputPathError(f"{p}: {root} is not a place to write a {kind} to")
     for part in absolute.parts:
