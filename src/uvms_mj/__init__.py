@@ -13,8 +13,9 @@ import os as _os
 import sys as _sys
 
 if _sys.argv and _os.path.basename(_sys.argv[0]) == "uvms-mj":
-    # The command line: Ctrl-C while the imports run (before any output) exits 130 quietly
-    # instead of with a KeyboardInterrupt traceback; cli.main puts Python's handler back.
+    # The command line: Ctrl-C exits 130 at once, quietly (no KeyboardInterrupt traceback, and
+    # none swallowed by an import lock's callback); runs and sweeps install their own handler
+    # (recorder.handle_sigterm) that closes the log first.
     import signal as _signal
 
     _signal.signal(_signal.SIGINT, lambda *_: (_sys.stderr.write("interrupted\n"), _os._exit(130)))

@@ -14,7 +14,6 @@ disk; the message names the file); 130 interrupted (Ctrl-C or SIGTERM; the log i
 from __future__ import annotations
 
 import sys
-import threading
 from pathlib import Path
 
 import click
@@ -58,14 +57,12 @@ def metrics_table(results: dict[str, dict[str, float]]) -> str:
 
 
 class _Group(click.Group):
-    """Ctrl-C anywhere (also before a run's own handler is installed) exits with 130, not
-    click's "Aborted!" with 1."""
+    """Ctrl-C anywhere exits with 130, not click's "Aborted!" with 1. (The installed command
+    gets a SIGINT handler that exits 130 at once from its first import on, see
+    uvms_mj/__init__.py; runs and sweeps replace it with :func:`uvms_mj.recorder.handle_sigterm`,
+    which closes the log first.)"""
 
     def make_context(self, *args, **kwargs):  # noqa: ANN002, ANN003
-        import signal
-
-        if threading.current_thread() is threading.main_thread():
-            signal.signal(signal.SIGINT, signal.default_int_handler)  # see uvms_mj/__init__.py
         try:
             return super().make_context(*args, **kwargs)
         except KeyboardInterrupt:

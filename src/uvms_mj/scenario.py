@@ -496,7 +496,7 @@ class ControllerSection(_Section):
 
     name: str = Field("rac_dob", description="one of uvms_mj.controllers.available()")
     params: dict[str, Any] = Field(default_factory=dict, description="keyword arguments of the controller")
-    base_reference: Literal["measured", "true", "nominal"] = Field(
+    base_reference: Literal["measured", "truth", "nominal"] = Field(
         "measured", description="the base's reference pose: the first (noisy) measurement, the plant's true "
         "initial pose, or the model file's initial pose (keyframe paper_initial)")
 
@@ -952,7 +952,7 @@ def build(scenario: Scenario) -> tuple[Plant, Any]:
                             cruise_speed=tr.cruise_speed, accel=tr.accel, t_start=tr.t_start)
         params = dict(scenario.controller.params)
         ref = scenario.controller.base_reference
-        if ref == "true":
+        if ref == "truth":
             params["base_reference"] = [float(v) for v in plant.q[:3]]
         elif ref == "nominal":
             params["base_reference"] = [float(v) for v in _nominal_initial_pose()]
