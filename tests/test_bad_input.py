@@ -302,6 +302,16 @@ def test_outputs_log_pointing_into_an_unwritable_place(cli, tmp_path):
     _usage_error(cli("validate", f), "/proc is not a place")
 
 
+def test_output_folders_of_compare_sweep_plot(cli, scenario, tmp_path):
+    for cmd in (("compare", scenario, "--out", "/sys/x"),
+                ("sweep", scenario, "--vary", "duration=[0.1]", "--out", "/proc/x"),
+                ("sweep", scenario, "--vary", "duration=[0.1]", "--out", scenario / "x"),
+                ("plot", scenario, "-o", "/proc/x")):
+        res = cli(*cmd)
+        _usage_error(res, "not a place" if str(cmd[-1]).startswith(("/proc", "/sys")) else "not a folder")
+    _usage_error(cli("sweep", scenario, "--vary", "duration=linspace(0.01, 0.1, 100000000)"), "at most 10000")
+
+
 def test_full_disk_is_an_io_error(cli, scenario, tmp_path, monkeypatch):
     from uvms_mj import recorder
 

@@ -95,6 +95,15 @@ def _check_out(path, protect: tuple = (), kind: str = "log", magic: bytes | None
         raise click.UsageError(str(exc)) from None
 
 
+def _check_dir(path) -> Path:
+    from .recorder import OutputPathError, check_output_dir
+
+    try:
+        return check_output_dir(path)
+    except OutputPathError as exc:
+        raise click.UsageError(str(exc)) from None
+
+
 def _warn(scenario) -> None:
     from .scenario import scenario_warnings
 
@@ -287,6 +296,7 @@ def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str
         raise click.BadParameter(f"unknown controller(s) {', '.join(unknown) or '(none given)'}; "
                                  f"registered: {', '.join(available())}", param_hint="--controllers")
     results, logs, failed = {}, {}, []
+    _check_dir(out_dir)
     base = _load(scenario, sets)
     for name in names:
         sc = _load(scenario, tuple(sets) + (f"controller.name={name}",))
@@ -332,7 +342,7 @@ def plot(log: str, out_dir: str | None) -> None:
     """Paper-style time histories (Figs. 5 and 6) and control signals of LOG, as PNG."""
     from .plots import plot_run
 
-    folder = Path(out_dir) if out_dir else Path(log).parent
+    folder = _check_dir(Path(out_dir) if out_dir else Path(log).parent)
     run_log = _read(log)
     try:
         folder.mkdir(parents=True, exist_ok=True)
@@ -529,7 +539,7 @@ def sweep(scenario: str, varies: tuple[str, ...], n: int | None, workers: int | 
         plan = plan_sweep(scenario, list(varies), n=n, seed=seed, controllers=controllers.split(","), sets=sets)
     except SweepError as exc:
         raise click.UsageError(str(exc)) from None
-    out = Path(out_dir) if out_dir else Path("logs") / f"{plan.name}-sweep"
+    out = _check_dir(Path(out_dir) if out_dir else Path("logs") / f"{plan.name}-sweep")
     n_samples = len(plan.samples)
     click.echo(f"sweep: {len(plan.runs)} runs ({n_samples} samples x {len(plan.controllers)} controllers: "
                f"{', '.join(plan.controllers)}) -> {out}")
@@ -550,6 +560,8 @@ def sweep(scenario: str, varies: tuple[str, ...], n: int | None, workers: int | 
             outcome = run_sweep(plan, out, workers=workers, engine=engine, logs=logs, fresh=fresh, on_run=on_run)
     except SweepError as exc:
         raise click.UsageError(str(exc)) from None
+    except OSError as exc:
+        _io_error(getattr(exc, "filename", None) or out, exc)
     except KeyboardInterrupt:
         if bar is not None:
             bar.close()

@@ -626,6 +626,28 @@ def check_output_path(path: str | os.PathLike, protect: tuple = (), kind: str = 
     return p
 
 
+def check_output_dir(path: str | os.PathLike) -> Path:
+    """Refuse an output folder under /proc, /sys or /dev (except /dev/shm), one that exists
+    as something else, or one whose nearest existing parent is a file or not writable.
+    Raises :class:`OutputPathError`; returns the path."""
+    p = Path(path)
+    absolute = Path(os.path.abspath(p))
+    if Path("/dev/shm") not in absolute.parents:
+        for root in _NO_WRITE_ROOTS:
+            if absolute == Path(root) or Path(root) in absolute.parents:
+                raise OutputPathError(f"{p}: {root} is not a place to write results to")
+    if p.exists() and not p.is_dir():
+        raise OutputPathError(f"{p}: exists and is not a folder")
+    parent = absolute
+    while not parent.exists():
+        parent = parent.parent
+    if not parent.is_dir():
+        raise OutputPathError(f"{p}: {parent} is a file, not a folder")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise OutputPathError(f"{p}: the folder {parent} is not writable")
+    return p
+
+
 def _open_locked(path: Path):
     """Open ``path`` for writing under an exclusive lock (never following a symbolic link),
     then truncate it: a second writer of the same log fails with :class:`LogInUseError`

@@ -35,7 +35,9 @@ exactly what ``PaperExperiment().run()`` runs. Units SI, world frame X horizonta
       gravity: true             # the controller compensates gravity and buoyancy
     sensors:                    # uvms_mj.loop.SensorModel
       position_noise: 0.0       # std [m]
-      angle_noise: 0.0          # std [rad]
+      angle_noise: 0.0          # std [rad]: shorthand for the two below
+      attitude_noise: null      # std on the base attitude phi0 [rad]; null: angle_noise
+      joint_noise: null         # std on the joint encoders phi1, phi2 [rad]; null: angle_noise
       position_quantum: 0.0     # [m], 0: none
       angle_quantum: 0.0        # [rad], 0: none
       delay: 0                  # samples: 0 | 1
@@ -44,6 +46,8 @@ exactly what ``PaperExperiment().run()`` runs. Units SI, world frame X horizonta
     controller:
       name: rac_dob             # uvms_mj.controllers.available()
       params: {}                # keyword arguments of the controller, e.g. {gamma: [0.3, 0.3, 0.2, 0.2, 0.2]}
+      base_reference: measured  # the base's reference pose: measured (the first measurement) |
+                                #   truth (the plant's initial pose) | nominal (the model file's keyframe)
     trajectory:                 # straight end-tip line with a trapezoidal speed profile
       target: null              # [x, y] world [m], or
       displacement: [0.3, 0.0]  # [dx, dy] from the initial tip position [m] (exactly one of the two)
@@ -60,6 +64,11 @@ exactly what ``PaperExperiment().run()`` runs. Units SI, world frame X horizonta
 
 The controller period T is ``controller.params.T`` (default: the controller's own, 1/60 s for
 the built-ins); it must be a whole multiple of ``physics.timestep``.
+
+Every numeric field is bounded (the constants below: ``DURATION_MAX``, ``TIMESTEP_RANGE``,
+``PERIOD_RANGE``, ...; ``thrusters.tau`` also by ``LAG_STABILITY``); booleans are never
+numbers. Files are read with ``FILE_SIZE_MAX``, ``DEPTH_MAX`` and without YAML aliases.
+:func:`scenario_warnings` lists valid but known-unstable combinations.
 
 Errors (:class:`ScenarioError`, a ValueError) name the file, the field path (e.g.
 ``controller.params.gamma``), the bad value and what is allowed, one line per problem; unknown
