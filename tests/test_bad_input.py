@@ -111,6 +111,34 @@ def test_fuzz_every_numeric_field(path, cli, tmp_path):
         res = cli("validate", _write(tmp_path, _with(path, value)))
         _no_traceback(res)
         assert res.exit_code in (0, 2), res.output
+    # run refuses the same before writing anything (cwd is tmp_path: the default log would be there)
+    value = ALWAYS_BAD[NUMERIC_FIELDS.index(path) % len(ALWAYS_BAD)]
+    f = _write(tmp_path, _with(path, value))
+    _usage_error(cli("run", f, "--set", "description=fuzz", "--plots"), str(f))
+    assert not any(tmp_path.glob("**/*.mcap")) and not any(tmp_path.glob("**/*.png"))
+
+
+def test_fuzz_runs_of_valid_edge_values(cli, tmp_path):
+    """Valid but extreme values run to a status (ok or diverged) with a readable log."""
+    import random
+
+    rng = random.Random(8)
+    cases = [(p, v) for p in NUMERIC_FIELDS for v in EDGE + [1e-9, 0.99]]
+    rng.shuffle(cases)
+    ran = 0
+    for path, value in cases:
+        f = _write(tmp_path, _with(path, value))
+        if cli("validate", f).exit_code != 0:
+            continue
+        out = tmp_path / f"run{ran}.mcap"
+        res = cli("run", f, "--set", "duration=0.3", "--out", out, "--no-plots")
+        _no_traceback(res)
+        assert res.exit_code in (0, 3), (path, value, res.output)
+        assert cli("info", out).exit_code == 0
+        ran += 1
+        if ran == 6:
+            break
+    assert ran == 6
 
 
 def test_bounds_are_named_in_the_error(cli, tmp_path):
@@ -348,10 +376,12 @@ def _malformed(tmp_path: Path, good: bytes) -> dict[str, Path]:
 
     cases = {"empty": b"", "magic": b"\x89MCAP0\r\n", "head": good[:200], "tail": good[-300:],
              "garbage": bytes(range(256)) * 20}
-    for i in range(4):
-        b = bytearray(good)
-        b[(len(b) * (i + 1)) // 5] ^= 0xFF
-        cases[f"flip{i}"] = bytes(b)
+    b = bytearray(good)
+    b[len(b) // 2] ^= 0xFF  # a flipped byte in the data (the log reads up to it, and plots)
+    cases["flip"] = bytes(b)
+    b = bytearray(good)
+    b[40] ^= 0xFF  # in the header
+    cases["flip_header"] = bytes(b)
     for name, topic, chmeta, meta in (
         ("other", "/x", {}, None),
         ("bogus_meta", "/x", {}, {"robot_params": "[1,2", "T": '"x"'}),
