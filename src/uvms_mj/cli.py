@@ -393,9 +393,9 @@ def info(log: str) -> None:
 @main.command()
 @click.option("--controllers", default="rac,rac_dob", show_default=True,
               help="Comma-separated controller names to run (registered: see --list).")
-@click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=40.0, show_default=True,
+@click.option("--duration", type=click.FloatRange(min=0, min_open=True, max=3600), default=40.0, show_default=True,
               help="Simulated time [s].")
-@click.option("--thruster-lag", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--thruster-lag", type=click.FloatRange(min=0, min_open=True, max=10), default=None,
               help="Plant thruster time constant [s] (default: the model's 0.02 s).")
 @click.option("--ideal", is_flag=True, help="Plant identical to the nominal model (no modelling error).")
 @click.option("--list", "list_only", is_flag=True, help="List the registered controllers and exit.")
@@ -413,6 +413,14 @@ def paper(controllers: str, duration: float, thruster_lag: float | None, ideal: 
     if unknown:
         raise click.BadParameter(f"unknown controller(s) {', '.join(unknown)}; registered: {', '.join(available())}",
                                  param_hint="--controllers")
+    if thruster_lag is not None:
+        from .scenario import LAG_STABILITY
+
+        dt = 1.0 / 120.0  # the model's RK4 step, which `paper` uses
+        if dt / thruster_lag >= LAG_STABILITY["rk4"]:
+            raise click.BadParameter(f"{thruster_lag!r} s: the thruster lag integrates stably with rk4 at "
+                                     f"{dt:.6g} s only for a lag > {dt / LAG_STABILITY['rk4']:.6g} s",
+                                     param_hint="--thruster-lag")
     over = {} if thruster_lag is None else {"thrusters.tau": thruster_lag}
     results = {}
     status = 0
@@ -430,7 +438,7 @@ def paper(controllers: str, duration: float, thruster_lag: float | None, ideal: 
 
 
 @main.command()
-@click.option("--seconds", type=click.FloatRange(min=0, min_open=True), default=10.0, show_default=True,
+@click.option("--seconds", type=click.FloatRange(min=0, min_open=True, max=3600), default=10.0, show_default=True,
               help="Simulated time [s].")
 @click.option("--current", type=(float, float), default=(0.0, 0.0), show_default=True,
               help="Uniform water current, world X and Y [m/s].")
