@@ -456,6 +456,12 @@ def test_base_reference_options(tmp_path):
         refs[ref] = ctrl._x0_ref.copy()
     assert np.allclose(refs["measured"][:2], q0[:2] + 0.01)
     assert np.allclose(refs["truth"], q0[:3]) and np.allclose(refs["nominal"], q0[:3])
+    from uvms_mj.scenario import resolved, validate_scenario
+
+    sc = load_scenario(f, ["controller.base_reference=truth"])
+    assert validate_scenario(resolved(sc)).controller.base_reference == "truth"  # logs re-validate
+    with pytest.raises(ValueError, match="not both"):
+        load_scenario(f, ["controller.base_reference=truth", "controller.params.base_reference=[0,0,0]"])
     with pytest.raises(ValueError, match="takes no base reference"):
         load_scenario(f, ["controller.name=pd", "controller.base_reference=truth"])
 

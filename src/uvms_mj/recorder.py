@@ -664,6 +664,8 @@ def _open_locked(path: Path):
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except BlockingIOError:
                 raise LogInUseError(f"{path}: another process is writing this log now") from None
+            except OSError:  # a file system without locks (some network mounts): write unlocked
+                pass
         os.ftruncate(fd, 0)
         return os.fdopen(fd, "wb")
     except BaseException:

@@ -527,7 +527,7 @@ class ControllerSection(_Section):
             if "base_reference" not in named:
                 raise _Issues([(("base_reference",), f"controller {self.name!r} takes no base reference; "
                                 "allowed: measured", self.base_reference)])
-            if "base_reference" in self.params:
+            if self.params.get("base_reference") is not None:
                 raise _Issues([(("base_reference",), "give either base_reference or params.base_reference, "
                                 "not both", self.base_reference)])
         return self
