@@ -232,6 +232,21 @@ def test_one_sample_run_ends_with_status_and_log(cli, tmp_path):
     assert info.exit_code == 0 and "status:    ok" in info.output
 
 
+def test_a_run_that_raises_ends_with_status_error(cli, tmp_path, monkeypatch):
+    from uvms_mj.controllers import builtin
+
+    def boom(self, m):
+        raise np.linalg.LinAlgError("Singular matrix")
+
+    monkeypatch.setattr(builtin.RAC, "compute", boom)
+    f = _write(tmp_path, {"duration": 0.3, "controller": {"name": "rac"}})
+    res = cli("run", f, "--out", tmp_path / "e.mcap")
+    _no_traceback(res)
+    assert res.exit_code == 1 and "error: the run failed: LinAlgError: Singular matrix" in res.output
+    info = cli("info", tmp_path / "e.mcap")
+    assert info.exit_code == 0 and "status:    error" in info.output
+
+
 class _Wild(Controller):
     name = "wild"
     T = 1 / 60

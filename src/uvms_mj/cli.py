@@ -4,7 +4,8 @@ Commands: ``run``, ``compare``, ``render``, ``plot``, ``validate``, ``info`` (sc
 and logs), ``sweep`` (parameter sweeps, :mod:`uvms_mj.sweep`), ``paper`` (the paper's
 experiment without a scenario file) and ``drift`` (the plant left to itself).
 
-Exit codes: 0 success; 1 unexpected error; 2 bad input (usage, scenario, parameters, an
+Exit codes: 0 success; 1 unexpected error (a run that raised: its log is closed with status
+"error" and the reason); 2 bad input (usage, scenario, parameters, an
 output path that cannot or must not be written, a log that another run is writing, an
 unreadable log); 3 a run diverged (the log is still written, with the reason); 4 rendering
 unavailable (missing GL libraries); 5 an output could not be written (I/O error such as a full
@@ -157,6 +158,13 @@ def _run_one(scenario, out: Path, progress: bool = True, source: str | None = No
                 rec.close(status="interrupted", reason=str(exc) or "interrupted (Ctrl-C)")
                 click.echo(f"interrupted; partial log closed cleanly: {out}", err=True)
                 sys.exit(EXIT_INTERRUPTED)
+            except (ArithmeticError, ValueError, TypeError, LookupError, RuntimeError) as exc:
+                # A controller or plant that raised mid-run: the log is closed with status "error".
+                reason = " ".join(f"{type(exc).__name__}: {exc}".split())[:400]
+                rec.close(status="error", reason=reason)
+                click.echo(f"log: {out}")
+                click.echo(f"error: the run failed: {reason}", err=True)
+                sys.exit(1)
             rec.close(status=res.status, reason=res.reason, meta=res.meta)
     except LogInUseError as exc:
         raise click.UsageError(str(exc)) from None
