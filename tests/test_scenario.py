@@ -225,7 +225,7 @@ def test_wrong_type(tmp_path):
     assert "plant.current: Input should be a valid list (got 0.1)" in msg
     msg = error_of(tmp_path, "trajectory: {displacement: [0.3]}\noutputs: {video_size: [640, 0]}\n")
     assert "trajectory.displacement" in msg and "at least 2 items" in msg
-    assert "outputs.video_size[1]: Input should be greater than 0 (got 0)" in msg
+    assert "outputs.video_size[1]: must be an even number of pixels from 16 to 2160" in msg and "(got 0)" in msg
 
 
 def test_out_of_range_gain_names_the_field_and_range(tmp_path):

@@ -9,6 +9,17 @@ underwater robot with 2 link manipulator": a floating base with 3 thrusters carr
     >>> plant.step(120)          # 1 s at the default 1/120 s step (RK4)
 """
 
+import os as _os
+import sys as _sys
+
+if _sys.argv and _os.path.basename(_sys.argv[0]) == "uvms-mj":
+    # The command line: Ctrl-C exits 130 at once, quietly (no KeyboardInterrupt traceback, and
+    # none swallowed by an import lock's callback); runs and sweeps install their own handler
+    # (recorder.handle_sigterm) that closes the log first.
+    import signal as _signal
+
+    _signal.signal(_signal.SIGINT, lambda *_: (_sys.stderr.write("interrupted\n"), _os._exit(130)))
+
 # Choose a headless OpenGL backend (MUJOCO_GL) before anything imports mujoco; see render.py.
 from .render import configure_gl as _configure_gl
 

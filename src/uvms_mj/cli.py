@@ -5,9 +5,12 @@ and logs), ``sweep`` (parameter sweeps, :mod:`uvms_mj.sweep`), ``paper`` (the pa
 experiment without a scenario file), ``drift`` (the plant left to itself) and ``view`` (a
 model file in MuJoCo's interactive viewer, in water).
 
-Exit codes: 0 success; 1 unexpected error; 2 bad input (usage, scenario, parameters);
-3 a run diverged (the log is still written, with the reason); 4 rendering unavailable
-(missing GL libraries); 130 interrupted (Ctrl-C or SIGTERM; the log is closed cleanly).
+Exit codes: 0 success; 1 unexpected error (a run that raised: its log is closed with status
+"error" and the reason); 2 bad input (usage, scenario, parameters, an
+output path that cannot or must not be written, a log that another run is writing, an
+unreadable log); 3 a run diverged (the log is still written, with the reason); 4 rendering
+unavailable (missing GL libraries); 5 an output could not be written (I/O error such as a full
+disk; the message names the file); 130 interrupted (Ctrl-C or SIGTERM; the log is closed cleanly).
 """
 
 from __future__ import annotations
@@ -25,6 +28,7 @@ from .plant import DivergenceError, Plant
 
 EXIT_DIVERGED = 3
 EXIT_RENDER = 4
+EXIT_IO = 5
 EXIT_INTERRUPTED = 130
 
 METRIC_LABELS = {
@@ -54,7 +58,62 @@ def metrics_table(results: dict[str, dict[str, float]]) -> str:
     return "\n".join(lines)
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+class _Group(click.Group):
+    """Ctrl-C anywhere exits with 130, not click's "Aborted!" with 1. (The installed command
+    gets a SIGINT handler that exits 130 at once from its first import on, see
+    uvms_mj/__init__.py; runs and sweeps replace it with :func:`uvms_mj.recorder.handle_sigterm`,
+    which closes the log first.)"""
+
+    def make_context(self, *args, **kwargs):  # noqa: ANN002, ANN003
+        try:
+            return super().make_context(*args, **kwargs)
+        except KeyboardInterrupt:
+            _interrupted()
+
+    def invoke(self, ctx):  # noqa: ANN001
+        try:
+            return super().invoke(ctx)
+        except KeyboardInterrupt:
+            _interrupted()
+
+
+def _interrupted() -> None:
+    click.echo("interrupted", err=True)
+    sys.exit(EXIT_INTERRUPTED)
+
+
+def _io_error(path, exc: OSError) -> None:
+    """An output that could not be written: one line, exit EXIT_IO."""
+    click.echo(f"error: cannot write {path}: {exc.strerror or exc}", err=True)
+    sys.exit(EXIT_IO)
+
+
+def _check_out(path, protect: tuple = (), kind: str = "log", magic: bytes | None = b"\x89MCAP") -> Path:
+    from .recorder import OutputPathError, check_output_path
+
+    try:
+        return check_output_path(path, protect=protect, kind=kind, magic=magic)
+    except OutputPathError as exc:
+        raise click.UsageError(str(exc)) from None
+
+
+def _check_dir(path) -> Path:
+    from .recorder import OutputPathError, check_output_dir
+
+    try:
+        return check_output_dir(path)
+    except OutputPathError as exc:
+        raise click.UsageError(str(exc)) from None
+
+
+def _warn(scenario) -> None:
+    from .scenario import scenario_warnings
+
+    for w in scenario_warnings(scenario):
+        click.echo(f"warning: {w}", err=True)
+
+
+@click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="uvms-mj")
 def main() -> None:
     """uvms-mj: a MuJoCo testbed for underwater vehicle-manipulator systems.
@@ -76,41 +135,71 @@ def _load(path: str, sets: tuple[str, ...]):
         raise click.UsageError(str(exc)) from None
 
 
-def _run_one(scenario, out: Path, progress: bool = True):
+def _run_one(scenario, out: Path, progress: bool = True, source: str | None = None):
     """Run one scenario into an MCAP log; returns (result, log path, metrics)."""
     from .experiment import metrics
-    from .recorder import McapRecorder, handle_sigterm
+    from .recorder import LogInUseError, McapRecorder, handle_sigterm
     from .scenario import ScenarioError, build, resolved, run_scenario
 
-    out.parent.mkdir(parents=True, exist_ok=True)
+    _check_out(out, protect=(source,))
     try:
         plant, ctrl = build(scenario)
     except (ScenarioError, ParameterError, ValueError) as exc:
         raise click.UsageError(str(exc)) from None
+    _warn(scenario)
     meta = {"scenario": resolved(scenario), "seed": scenario.seed}
-    with _progress(f"{scenario.name} [{scenario.controller.name}]", "sample") as tick, handle_sigterm(), \
-            McapRecorder(out, plant.params, meta) as rec:
-        try:
-            res = run_scenario(scenario, sink=rec.write_sample, on_sample=tick if progress else None,
-                               built=(plant, ctrl))
-        except KeyboardInterrupt as exc:
-            rec.close(status="interrupted", reason=str(exc) or "interrupted (Ctrl-C)")
-            click.echo(f"interrupted; partial log closed cleanly: {out}", err=True)
-            sys.exit(EXIT_INTERRUPTED)
-        rec.close(status=res.status, reason=res.reason, meta=res.meta)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        with _progress(f"{scenario.name} [{scenario.controller.name}]", "sample") as tick, handle_sigterm(), \
+                McapRecorder(out, plant.params, meta) as rec:
+            try:
+                res = run_scenario(scenario, sink=rec.write_sample, on_sample=tick if progress else None,
+                                   built=(plant, ctrl))
+            except KeyboardInterrupt as exc:
+                rec.close(status="interrupted", reason=str(exc) or "interrupted (Ctrl-C)")
+                click.echo(f"interrupted; partial log closed cleanly: {out}", err=True)
+                sys.exit(EXIT_INTERRUPTED)
+            except (ArithmeticError, ValueError, TypeError, LookupError, RuntimeError) as exc:
+                # A controller or plant that raised mid-run: the log is closed with status "error".
+                reason = " ".join(f"{type(exc).__name__}: {exc}".split())[:400]
+                rec.close(status="error", reason=reason)
+                click.echo(f"log: {out}")
+                click.echo(f"error: the run failed: {reason}", err=True)
+                sys.exit(1)
+            rec.close(status=res.status, reason=res.reason, meta=res.meta)
+    except LogInUseError as exc:
+        raise click.UsageError(str(exc)) from None
+    except OSError as exc:
+        _io_error(out, exc)
     return res, out, metrics(res)
+
+
+def _plots(log_path: Path) -> None:
+    """The plots of a run's log; a run too short (or too broken) to plot gets a warning."""
+    from .plots import plot_run
+
+    try:
+        paths = plot_run(_read(log_path), log_path.parent, stem=log_path.stem)
+    except OSError as exc:
+        _io_error(log_path.parent, exc)
+    except (ValueError, KeyError, IndexError, TypeError) as exc:
+        click.echo(f"warning: no plots for {log_path}: {exc}", err=True)
+        return
+    for p in paths:
+        click.echo(f"plot: {p}")
 
 
 def _read(path) -> object:
     """read_log with bad files turned into a usage error (exit 2), never a traceback."""
-    from mcap.exceptions import McapError
-
     from .recorder import read_log
 
     try:
         return read_log(path)
-    except (McapError, OSError, ValueError, KeyError) as exc:
-        raise click.UsageError(f"{path}: not a readable uvms-mj MCAP log ({exc})") from None
+    except (MemoryError, RecursionError) as exc:
+        raise click.UsageError(f"{path}: not a readable uvms-mj MCAP log ({type(exc).__name__})") from None
+    except Exception as exc:  # noqa: BLE001 - McapError, struct, zstd, JSON... any malformed file
+        raise click.UsageError(f"{path}: not a readable uvms-mj MCAP log ({type(exc).__name__}: "
+                               f"{str(exc)[:200]})") from None
 
 
 def _default_log(scenario, out: str | None, controller: str) -> Path:
@@ -128,13 +217,26 @@ def _video(log_path: Path, video_path: Path, scenario=None) -> None:
     kw = {}
     if scenario is not None:
         kw = {"fps": scenario.outputs.video_fps, "size": tuple(scenario.outputs.video_size)}
+    _check_out(video_path, kind="video", magic=None)
+    info = _render(log, video_path, log_path, **kw)
+    click.echo(f"video: {video_path} ({info['frames']} frames)")
+
+
+def _render(log, video_path: Path, log_path, **kw) -> dict:
+    """render_video with GL trouble -> EXIT_RENDER, a log it cannot replay -> usage error,
+    a write failure -> EXIT_IO."""
+    from .render import RenderError, render_video
+
     try:
         with _progress(f"render {video_path.name}", "frame") as tick:
-            info = render_video(log, video_path, on_frame=tick, **kw)
+            return render_video(log, video_path, on_frame=tick, **kw)
     except RenderError as exc:
         click.echo(f"error: {exc}", err=True)
         sys.exit(EXIT_RENDER)
-    click.echo(f"video: {video_path} ({info['frames']} frames)")
+    except OSError as exc:
+        _io_error(video_path, exc)
+    except (ValueError, KeyError, IndexError, TypeError) as exc:
+        raise click.UsageError(f"{log_path}: cannot be replayed: {type(exc).__name__}: {str(exc)[:200]}") from None
 
 
 class _progress:
@@ -170,15 +272,13 @@ def run(scenario: str, sets: tuple[str, ...], out: str | None, video: bool | Non
     Exits with 3 if the run diverged (the log is kept, with the reason)."""
     sc = _load(scenario, sets)
     log = _default_log(sc, out, sc.controller.name)
-    res, log, m = _run_one(sc, log)
+    if video if video is not None else sc.outputs.video:
+        _check_out(log.with_suffix(".mp4"), kind="video", magic=None)
+    res, log, m = _run_one(sc, log, source=scenario)
     click.echo(f"log: {log}")
     click.echo(metrics_table({sc.controller.name: m}))
     if plots if plots is not None else sc.outputs.plots:
-        from .plots import plot_run
-        from .recorder import read_log
-
-        for p in plot_run(read_log(log), log.parent, stem=log.stem):
-            click.echo(f"plot: {p}")
+        _plots(log)
     if video if video is not None else sc.outputs.video:
         _video(log, log.with_suffix(".mp4"), sc)
     if res.status != "ok":
@@ -198,7 +298,6 @@ def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str
     and one comparison figure (PNG)."""
     from .controllers import available
     from .plots import plot_comparison
-    from .recorder import read_log
 
     names = [c.strip() for c in controllers.split(",") if c.strip()]
     unknown = [c for c in names if c not in available()]
@@ -206,11 +305,12 @@ def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str
         raise click.BadParameter(f"unknown controller(s) {', '.join(unknown) or '(none given)'}; "
                                  f"registered: {', '.join(available())}", param_hint="--controllers")
     results, logs, failed = {}, {}, []
+    _check_dir(out_dir)
     base = _load(scenario, sets)
     for name in names:
         sc = _load(scenario, tuple(sets) + (f"controller.name={name}",))
         path = Path(out_dir) / f"{sc.name}-{name}.mcap"
-        res, path, m = _run_one(sc, path)
+        res, path, m = _run_one(sc, path, source=scenario)
         results[name], logs[name] = m, path
         click.echo(f"log: {path}")
         if res.status != "ok":
@@ -218,8 +318,13 @@ def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str
         if video:
             _video(path, path.with_suffix(".mp4"), sc)
     click.echo(metrics_table(results))
-    fig = plot_comparison({n: read_log(p) for n, p in logs.items()}, Path(out_dir) / f"{base.name}-compare.png")
-    click.echo(f"figure: {fig}")
+    try:
+        fig = plot_comparison({n: _read(p) for n, p in logs.items()}, Path(out_dir) / f"{base.name}-compare.png")
+        click.echo(f"figure: {fig}")
+    except OSError as exc:
+        _io_error(Path(out_dir) / f"{base.name}-compare.png", exc)
+    except (ValueError, KeyError, IndexError, TypeError) as exc:
+        click.echo(f"warning: no comparison figure: {exc}", err=True)
     if failed:
         click.echo("error: " + "; ".join(failed), err=True)
         sys.exit(EXIT_DIVERGED)
@@ -232,16 +337,10 @@ def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str
 @click.option("--size", type=(int, int), default=(640, 480), show_default=True, help="Width and height [px].")
 def render(log: str, output: str | None, fps: int, size: tuple[int, int]) -> None:
     """Replay LOG's states in MuJoCo and render an MP4 off-screen (no re-simulation)."""
-    from .render import RenderError, render_video
-
     out = Path(output) if output else Path(log).with_suffix(".mp4")
+    _check_out(out, protect=(log,), kind="video", magic=None)
     run_log = _read(log)
-    try:
-        with _progress(f"render {out.name}", "frame") as tick:
-            info = render_video(run_log, out, fps=fps, size=size, on_frame=tick)
-    except RenderError as exc:
-        click.echo(f"error: {exc}", err=True)
-        sys.exit(EXIT_RENDER)
+    info = _render(run_log, out, log, fps=fps, size=size)
     click.echo(f"video: {out} ({info['frames']} frames)")
 
 
@@ -252,9 +351,16 @@ def plot(log: str, out_dir: str | None) -> None:
     """Paper-style time histories (Figs. 5 and 6) and control signals of LOG, as PNG."""
     from .plots import plot_run
 
-    folder = Path(out_dir) if out_dir else Path(log).parent
-    folder.mkdir(parents=True, exist_ok=True)
-    for p in plot_run(_read(log), folder, stem=Path(log).stem):
+    folder = _check_dir(Path(out_dir) if out_dir else Path(log).parent)
+    run_log = _read(log)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        paths = plot_run(run_log, folder, stem=Path(log).stem)
+    except OSError as exc:
+        _io_error(folder, exc)
+    except Exception as exc:  # noqa: BLE001 - a log that reads but holds nonsense
+        raise click.UsageError(f"{log}: cannot be plotted: {type(exc).__name__}: {str(exc)[:200]}") from None
+    for p in paths:
         click.echo(f"plot: {p}")
 
 
@@ -270,6 +376,8 @@ def validate(scenario: str, sets: tuple[str, ...]) -> None:
         build(sc)
     except (ScenarioError, ParameterError, ValueError) as exc:
         raise click.UsageError(str(exc)) from None
+    _check_out(_default_log(sc, None, sc.controller.name), protect=(scenario,))
+    _warn(sc)
     click.echo(f"{scenario}: ok ({sc.name}, controller {sc.controller.name}, {sc.duration:g} s)")
 
 
@@ -294,9 +402,9 @@ def info(log: str) -> None:
 @main.command()
 @click.option("--controllers", default="rac,rac_dob", show_default=True,
               help="Comma-separated controller names to run (registered: see --list).")
-@click.option("--duration", type=click.FloatRange(min=0, min_open=True), default=40.0, show_default=True,
+@click.option("--duration", type=click.FloatRange(min=0, min_open=True, max=3600), default=40.0, show_default=True,
               help="Simulated time [s].")
-@click.option("--thruster-lag", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--thruster-lag", type=click.FloatRange(min=0, min_open=True, max=10), default=None,
               help="Plant thruster time constant [s] (default: the model's 0.02 s).")
 @click.option("--ideal", is_flag=True, help="Plant identical to the nominal model (no modelling error).")
 @click.option("--list", "list_only", is_flag=True, help="List the registered controllers and exit.")
@@ -314,6 +422,14 @@ def paper(controllers: str, duration: float, thruster_lag: float | None, ideal: 
     if unknown:
         raise click.BadParameter(f"unknown controller(s) {', '.join(unknown)}; registered: {', '.join(available())}",
                                  param_hint="--controllers")
+    if thruster_lag is not None:
+        from .scenario import LAG_STABILITY
+
+        dt = 1.0 / 120.0  # the model's RK4 step, which `paper` uses
+        if dt / thruster_lag >= LAG_STABILITY["rk4"]:
+            raise click.BadParameter(f"{thruster_lag!r} s: the thruster lag integrates stably with rk4 at "
+                                     f"{dt:.6g} s only for a lag > {dt / LAG_STABILITY['rk4']:.6g} s",
+                                     param_hint="--thruster-lag")
     over = {} if thruster_lag is None else {"thrusters.tau": thruster_lag}
     results = {}
     status = 0
@@ -331,7 +447,7 @@ def paper(controllers: str, duration: float, thruster_lag: float | None, ideal: 
 
 
 @main.command()
-@click.option("--seconds", type=click.FloatRange(min=0, min_open=True), default=10.0, show_default=True,
+@click.option("--seconds", type=click.FloatRange(min=0, min_open=True, max=3600), default=10.0, show_default=True,
               help="Simulated time [s].")
 @click.option("--current", type=(float, float), default=(0.0, 0.0), show_default=True,
               help="Uniform water current, world X and Y [m/s].")
@@ -440,7 +556,7 @@ def sweep(scenario: str, varies: tuple[str, ...], n: int | None, workers: int | 
         plan = plan_sweep(scenario, list(varies), n=n, seed=seed, controllers=controllers.split(","), sets=sets)
     except SweepError as exc:
         raise click.UsageError(str(exc)) from None
-    out = Path(out_dir) if out_dir else Path("logs") / f"{plan.name}-sweep"
+    out = _check_dir(Path(out_dir) if out_dir else Path("logs") / f"{plan.name}-sweep")
     n_samples = len(plan.samples)
     click.echo(f"sweep: {len(plan.runs)} runs ({n_samples} samples x {len(plan.controllers)} controllers: "
                f"{', '.join(plan.controllers)}) -> {out}")
@@ -461,6 +577,8 @@ def sweep(scenario: str, varies: tuple[str, ...], n: int | None, workers: int | 
             outcome = run_sweep(plan, out, workers=workers, engine=engine, logs=logs, fresh=fresh, on_run=on_run)
     except SweepError as exc:
         raise click.UsageError(str(exc)) from None
+    except OSError as exc:
+        _io_error(getattr(exc, "filename", None) or out, exc)
     except KeyboardInterrupt:
         if bar is not None:
             bar.close()

@@ -93,10 +93,19 @@ class PaperExperiment:
                                warm_start=self.warm_start, on_sample=on_sample)
 
 
+METRIC_KEYS = ("base_pos_rms_mm", "base_pos_max_mm", "base_att_rms_mrad", "base_att_max_mrad", "tip_rms_mm",
+               "tip_max_mm", "thrust_rms_N", "torque_rms_Nm", "saturated_s")
+
+
 def metrics(result: RunResult) -> dict[str, float]:
     """RMS and max of the base position error, base attitude error and end-tip error (true state
-    against the desired one), RMS thrust, and time with a thruster saturated."""
+    against the desired one), RMS thrust, and time with a thruster saturated. All NaN when the
+    run has no sample with these signals (never raises for a short or broken run)."""
     s = result.signals
+    needed = ("p_desired", "q_true", "tip_true", "thrust_force", "torques")
+    if any(k not in s or len(s[k]) == 0 for k in needed):
+        # A run that stopped before its first sample (or a log without these signals): no metrics.
+        return {k: float("nan") for k in METRIC_KEYS}
     pd = s["p_desired"]
     q = s["q_true"]
     base = np.linalg.norm(pd[:, :2] - q[:, :2], axis=1)

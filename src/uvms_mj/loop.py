@@ -16,7 +16,12 @@ from typing import Callable
 import numpy as np
 
 from .controllers.base import Command, Controller, Measurement
-from .plant import DivergenceError, Plant
+from .plant import DivergenceError, Plant, mujoco_warnings
+
+
+#: A thrust or joint-torque command beyond this [N, N m] is taken as divergence of the
+#: controller (the robot's actuators give tens of N; the plant saturates them anyway).
+COMMAND_ABS_MAX = 1e6
 
 
 @dataclass(frozen=True)
@@ -25,7 +30,9 @@ class SensorModel:
 
     Attributes:
         position_noise: std of Gaussian noise on p0x, p0y [m].
-        angle_noise: std of Gaussian noise on phi0, phi1, phi2 [rad].
+        angle_noise: std of Gaussian noise on phi0, phi1, phi2 [rad] (shorthand for both below).
+        attitude_noise: std on the base attitude phi0 [rad] (None: angle_noise).
+        joint_noise: std on the joint encoders phi1, phi2 [rad] (None: angle_noise).
         position_quantum, angle_quantum: quantization steps [m], [rad] (0: none).
         delay: samples of measurement/computation delay (0 or 1).
         velocity_sensor: give the controller the true velocities (plus velocity_noise).
@@ -39,10 +46,15 @@ class SensorModel:
     delay: int = 0
     velocity_sensor: bool = False
     velocity_noise: float = 0.0
+    attitude_noise: float | None = None
+    joint_noise: float | None = None
 
     def __post_init__(self) -> None:
-        for name in ("position_noise", "angle_noise", "position_quantum", "angle_quantum", "velocity_noise"):
+        for name in ("position_noise", "angle_noise", "position_quantum", "angle_quantum", "velocity_noise",
+                     "attitude_noise", "joint_noise"):
             v = getattr(self, name)
+            if v is None and name in ("attitude_noise", "joint_noise"):
+                continue
             if not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"sensor.{name} = {v!r} must be finite and >= 0")
         if self.delay not in (0, 1):
@@ -106,15 +118,19 @@ def run_closed_loop(
     times: list[float] = []
     status, reason = "ok", ""
     q_prev_meas = None
+    mujoco_warnings(clear=True)  # only this run's
 
-    noisy = bool(sensor.position_noise or sensor.angle_noise)
+    att_noise = sensor.angle_noise if sensor.attitude_noise is None else sensor.attitude_noise
+    joint_noise = sensor.angle_noise if sensor.joint_noise is None else sensor.joint_noise
+    angle_std = np.array([att_noise, joint_noise, joint_noise], dtype=float)
+    noisy = bool(sensor.position_noise or att_noise or joint_noise)
     quantized = bool(sensor.position_quantum or sensor.angle_quantum)
 
     def measure(k: int) -> Measurement:
         nonlocal q_prev_meas
         q = plant.q
         if noisy:
-            q = q + np.concatenate((rng.normal(0, sensor.position_noise, 2), rng.normal(0, sensor.angle_noise, 3)))
+            q = q + np.concatenate((rng.normal(0, sensor.position_noise, 2), rng.normal(0, angle_std)))
         if quantized:
             q = np.concatenate((_quantize(q[:2], sensor.position_quantum), _quantize(q[2:], sensor.angle_quantum)))
         qd = None
@@ -133,6 +149,11 @@ def run_closed_loop(
         cmd: Command = controller.compute(meas)
         if not math.isfinite(float(np.sum(cmd.thrust)) + float(np.sum(cmd.torques))):
             status, reason = "diverged", f"controller output not finite at t = {k * T:.4f} s"
+            break
+        big = max(float(np.max(np.abs(cmd.thrust), initial=0.0)), float(np.max(np.abs(cmd.torques), initial=0.0)))
+        if big > COMMAND_ABS_MAX:
+            status, reason = "diverged", (f"controller command {big:.3g} (N or N m) beyond {COMMAND_ABS_MAX:g} "
+                                          f"at t = {k * T:.4f} s")
             break
         plant.set_thrust(cmd.thrust)
         plant.set_joint_torques(cmd.torques)
@@ -159,5 +180,10 @@ def run_closed_loop(
             status, reason = "diverged", str(exc)
             break
     signals = {key: np.asarray(v) for key, v in rec.items()}
-    return RunResult(t=np.asarray(times), signals=signals, status=status, reason=reason,
-                     meta={"T": T, "dt": dt, "seed": seed, "controller": controller.name})
+    meta = {"T": T, "dt": dt, "seed": seed, "controller": controller.name}
+    warned = mujoco_warnings(clear=True)
+    if warned:
+        meta["mujoco_warnings"] = warned
+        if status != "ok":
+            reason = f"{reason}; MuJoCo warning: {warned[0]}"
+    return RunResult(t=np.asarray(times), signals=signals, status=status, reason=reason, meta=meta)

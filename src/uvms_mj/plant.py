@@ -62,6 +62,49 @@ def default_model_path() -> Path:
     return models_dir() / "scene.xml"
 
 
+# MuJoCo's own warnings (mju_warning: e.g. "Nan, Inf or huge value in QACC") go by default to
+# stdout and to a MUJOCO_LOG.TXT in the current folder. They are routed instead to stderr and to
+# a per-process list that the closed loop puts in its run's metadata (RunResult.meta
+# "mujoco_warnings"). Each process (sweep workers included) installs its own handler.
+_MJ_WARNINGS: list[str] = []
+_MJ_WARNINGS_MAX = 100
+_mj_lock = threading.Lock()
+_mj_handler_pid: int | None = None
+
+
+def _on_mujoco_warning(msg: str) -> None:
+    text = " ".join(str(msg).split())
+    with _mj_lock:
+        if len(_MJ_WARNINGS) < _MJ_WARNINGS_MAX:
+            _MJ_WARNINGS.append(text)
+    try:
+        import sys
+
+        sys.stderr.write(f"mujoco warning: {text}\n")
+    except Exception:  # noqa: BLE001 - a closed stderr must not break the simulation
+        pass
+
+
+def install_mujoco_warning_handler() -> None:
+    """Route MuJoCo's warnings to stderr and :func:`mujoco_warnings` instead of MUJOCO_LOG.TXT
+    (once per process; done by every Plant)."""
+    global _mj_handler_pid
+    import os
+
+    if _mj_handler_pid != os.getpid():
+        mujoco.set_mju_user_warning(_on_mujoco_warning)
+        _mj_handler_pid = os.getpid()
+
+
+def mujoco_warnings(clear: bool = True) -> list[str]:
+    """MuJoCo warnings seen in this process since the last call (with ``clear``)."""
+    with _mj_lock:
+        out = list(_MJ_WARNINGS)
+        if clear:
+            _MJ_WARNINGS.clear()
+    return out
+
+
 class DivergenceError(RuntimeError):
     """The simulated state became non-finite or ran away.
 
@@ -155,6 +198,7 @@ class Plant:
         max_speed: float = 100.0,
         backend: str | None = None,
     ) -> None:
+        install_mujoco_warning_handler()
         path = Path(model) if model is not None else default_model_path()
         if not isinstance(terms, HydroTerms):
             raise ParameterError(f"terms = {terms!r} must be a HydroTerms")

@@ -408,6 +408,8 @@ class _Replay:
         width, height = int(size[0]), int(size[1])
         if width < 16 or height < 16:
             raise ValueError(f"size = {size!r}: width and height must be at least 16 pixels")
+        if width > 3840 or height > 2160:
+            raise ValueError(f"size = {size!r}: at most 3840 x 2160 pixels")
         if not (fps > 0 and speed > 0):
             raise ValueError(f"fps = {fps!r} and speed = {speed!r} must be > 0")
         ts = np.asarray(log.t, dtype=float).ravel()

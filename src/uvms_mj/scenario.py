@@ -35,7 +35,9 @@ exactly what ``PaperExperiment().run()`` runs. Units SI, world frame X horizonta
       gravity: true             # the controller compensates gravity and buoyancy
     sensors:                    # uvms_mj.loop.SensorModel
       position_noise: 0.0       # std [m]
-      angle_noise: 0.0          # std [rad]
+      angle_noise: 0.0          # std [rad]: shorthand for the two below
+      attitude_noise: null      # std on the base attitude phi0 [rad]; null: angle_noise
+      joint_noise: null         # std on the joint encoders phi1, phi2 [rad]; null: angle_noise
       position_quantum: 0.0     # [m], 0: none
       angle_quantum: 0.0        # [rad], 0: none
       delay: 0                  # samples: 0 | 1
@@ -44,6 +46,8 @@ exactly what ``PaperExperiment().run()`` runs. Units SI, world frame X horizonta
     controller:
       name: rac_dob             # uvms_mj.controllers.available()
       params: {}                # keyword arguments of the controller, e.g. {gamma: [0.3, 0.3, 0.2, 0.2, 0.2]}
+      base_reference: measured  # the base's reference pose: measured (the first measurement) |
+                                #   truth (the plant's initial pose) | nominal (the model file's keyframe)
     trajectory:                 # straight end-tip line with a trapezoidal speed profile
       target: null              # [x, y] world [m], or
       displacement: [0.3, 0.0]  # [dx, dy] from the initial tip position [m] (exactly one of the two)
@@ -60,6 +64,11 @@ exactly what ``PaperExperiment().run()`` runs. Units SI, world frame X horizonta
 
 The controller period T is ``controller.params.T`` (default: the controller's own, 1/60 s for
 the built-ins); it must be a whole multiple of ``physics.timestep``.
+
+Every numeric field is bounded (the constants below: ``DURATION_MAX``, ``TIMESTEP_RANGE``,
+``PERIOD_RANGE``, ...; ``thrusters.tau`` also by ``LAG_STABILITY``); booleans are never
+numbers. Files are read with ``FILE_SIZE_MAX``, ``DEPTH_MAX`` and without YAML aliases.
+:func:`scenario_warnings` lists valid but known-unstable combinations.
 
 Errors (:class:`ScenarioError`, a ValueError) name the file, the field path (e.g.
 ``controller.params.gamma``), the bad value and what is allowed, one line per problem; unknown
@@ -196,6 +205,32 @@ def _non_finite(value: Any, path: tuple = ()) -> list[tuple]:
     return []
 
 
+def _has_bool(value: Any) -> bool:
+    """A boolean inside nested lists/dicts (YAML true/false, which Python would take as 1/0)."""
+    if isinstance(value, (bool, np.bool_)):
+        return True
+    if isinstance(value, dict):
+        return any(_has_bool(v) for v in value.values())
+    if isinstance(value, (list, tuple)):
+        return any(_has_bool(v) for v in value)
+    return False
+
+
+def _out_of_range(value: Any) -> bool:
+    """A number inside nested lists/dicts outside 0 or [SIZE_MIN, PARAM_ABS_MAX] in magnitude."""
+    if _is_number(value):
+        try:
+            a = abs(float(value))
+        except OverflowError:
+            return True
+        return a != 0 and not SIZE_MIN <= a <= PARAM_ABS_MAX
+    if isinstance(value, dict):
+        return any(_out_of_range(v) for v in value.values())
+    if isinstance(value, (list, tuple)):
+        return any(_out_of_range(v) for v in value)
+    return False
+
+
 def _check_overrides(overrides: dict, allow_thrusters: bool) -> list[tuple[tuple, str, Any]]:
     """Each override key is known and its value valid on its own (applied to a copy of the
     model, then re-read with read_params' physical checks)."""
@@ -217,6 +252,10 @@ def _check_overrides(overrides: dict, allow_thrusters: bool) -> list[tuple[tuple
             continue
         if _non_finite(value):
             issues.append(((key,), "must be finite", value))
+            continue
+        if _out_of_range(value):
+            issues.append(((key,), f"numbers must be 0 or within {SIZE_MIN:g} to {PARAM_ABS_MAX:g} in magnitude",
+                           value))
             continue
         try:
             read_params(compile_robot(models_dir() / "uvms.xml", {key: value}))
@@ -276,6 +315,11 @@ def _check_controller_params(name: str, params: dict) -> list[tuple[tuple, str, 
                            + ", ".join(named), _NO_VALUE))
         elif _non_finite(value):
             issues.append(((key,), "must be finite", value))
+        elif _has_bool(value) and not (key in named and isinstance(named[key].default, bool)):
+            issues.append(((key,), "must be a number, not a boolean (true/false)", value))
+        elif _out_of_range(value):
+            issues.append(((key,), f"numbers must be 0 or within {SIZE_MIN:g} to {PARAM_ABS_MAX:g} in "
+                           "magnitude", value))
     if issues:
         return issues
 
@@ -313,7 +357,35 @@ def _fmt_path(loc: Sequence) -> str:
 
 # --------------------------------------------------------------------------- schema
 
+#: Bounds of the numeric fields (physically sensible; documented in the README's testbed section).
+DURATION_MAX = 3600.0  # [s] duration, t_start
+TIMESTEP_RANGE = (1e-5, 0.1)  # [s] physics.timestep
+PERIOD_RANGE = (1e-4, 1.0)  # [s] the controller period T
+TAU_MAX = 10.0  # [s] thrusters.tau
+FORCE_MAX = 1e4  # [N] |force_range|, |dead_zone_band|
+CURRENT_MAX = 10.0  # [m/s] |plant.current|
+LENGTH_MAX = 100.0  # [m] |trajectory.target|, |trajectory.displacement|
+SPEED_MAX = 10.0  # [m/s] trajectory.cruise_speed
+ACCEL_MAX = 100.0  # [m/s^2] trajectory.accel
+POSITION_SIZE_MAX = 1.0  # [m] position noise and quantum
+ANGLE_SIZE_MAX = math.pi  # [rad] angle noise and quantum
+VELOCITY_NOISE_MAX = 10.0  # [m/s, rad/s]
+SIZE_MIN = 1e-9  # smallest non-zero noise, quantum, speed, acceleration
+SEED_MAX = 2**63 - 1
+NAME_MAX = 100  # characters (the default log name must fit in a file name)
+DESCRIPTION_MAX = 10_000  # characters
+VIDEO_FPS_MAX = 120
+VIDEO_SIZE_MAX = (3840, 2160)  # [px] width, height
+#: |value| of a numeric controller parameter or parameter override: at most this, and 0 or at least 1e-9
+PARAM_ABS_MAX = 1e6
+#: Largest timestep / tau for which the plant integrator keeps the thruster lag stable: explicit
+#: Euler |1 - x| < 1; RK4 |1 - x + x^2/2 - x^3/6 + x^4/24| < 1 (MuJoCo integrates activations
+#: explicitly with every integrator except rk4, which integrates them with the rest of the state).
+LAG_STABILITY = {"euler": 2.0, "implicit": 2.0, "implicitfast": 2.0, "rk4": 2.785}
+
 Vec2 = Annotated[list[float], Field(min_length=2, max_length=2)]
+ForceVec2 = Annotated[list[Annotated[float, Field(ge=-FORCE_MAX, le=FORCE_MAX)]], Field(min_length=2, max_length=2)]
+LengthVec2 = Annotated[list[Annotated[float, Field(ge=-LENGTH_MAX, le=LENGTH_MAX)]], Field(min_length=2, max_length=2)]
 
 
 class _Section(BaseModel):
@@ -323,7 +395,8 @@ class _Section(BaseModel):
 class Physics(_Section):
     """MuJoCo integration settings (defaults: the model file's)."""
 
-    timestep: float = Field(default_factory=_default("timestep"), gt=0, description="plant step [s] (model: 1/120 s)")
+    timestep: float = Field(default_factory=_default("timestep"), ge=TIMESTEP_RANGE[0], le=TIMESTEP_RANGE[1],
+                            description="plant step [s] (model: 1/120 s)")
     integrator: Literal["euler", "rk4", "implicit", "implicitfast"] = Field(
         default_factory=_default("integrator"), description="MuJoCo integrator (model: rk4)")
     backend: Literal["auto", "native", "python"] = Field(
@@ -346,7 +419,9 @@ class PlantSection(_Section):
     overrides: dict[str, Any] = Field(default_factory=dict, description="OVERRIDE_KEYS entries applied on top")
     hydro: Hydro = Field(default_factory=Hydro)
     gravity: bool = True
-    current: Vec2 = Field(default_factory=lambda: [0.0, 0.0], description="world [vx, vy] [m/s]")
+    current: Annotated[list[Annotated[float, Field(ge=-CURRENT_MAX, le=CURRENT_MAX)]],
+                       Field(min_length=2, max_length=2)] = Field(
+        default_factory=lambda: [0.0, 0.0], description="world [vx, vy] [m/s]")
 
     @field_validator("overrides")
     @classmethod
@@ -360,10 +435,10 @@ class PlantSection(_Section):
 class Thrusters(_Section):
     """The plant's thrusters (the controller allocates with the nominal model's, as if ideal)."""
 
-    tau: float = Field(default_factory=_default("tau"), gt=0, description="first-order lag [s] (model: 0.02)")
-    force_range: Vec2 = Field(default_factory=_default("force_range"), description="[min, max] [N], min < 0 < max")
+    tau: float = Field(default_factory=_default("tau"), gt=0, le=TAU_MAX, description="first-order lag [s] (model: 0.02)")
+    force_range: ForceVec2 = Field(default_factory=_default("force_range"), description="[min, max] [N], min < 0 < max")
     dead_zone: bool = Field(False, description="zero commands inside dead_zone_band")
-    dead_zone_band: Vec2 = Field(default_factory=_default("dead_zone_band"), description="[low, high] [N]")
+    dead_zone_band: ForceVec2 = Field(default_factory=_default("dead_zone_band"), description="[low, high] [N]")
 
     @model_validator(mode="after")
     def _ranges(self) -> "Thrusters":
@@ -397,13 +472,30 @@ class NominalSection(_Section):
 class Sensors(_Section):
     """The measurement model (:class:`uvms_mj.loop.SensorModel`; all off by default)."""
 
-    position_noise: float = Field(0.0, ge=0, description="std on p0x, p0y [m]")
-    angle_noise: float = Field(0.0, ge=0, description="std on phi0, phi1, phi2 [rad]")
-    position_quantum: float = Field(0.0, ge=0, description="[m], 0: none")
-    angle_quantum: float = Field(0.0, ge=0, description="[rad], 0: none")
+    position_noise: float = Field(0.0, ge=0, le=POSITION_SIZE_MAX, description="std on p0x, p0y [m]")
+    angle_noise: float = Field(0.0, ge=0, le=ANGLE_SIZE_MAX,
+                               description="std on phi0, phi1, phi2 [rad] (shorthand: sets both below)")
+    attitude_noise: float | None = Field(None, ge=0, le=ANGLE_SIZE_MAX,
+                                         description="std on the base attitude phi0 [rad]; null: angle_noise")
+    joint_noise: float | None = Field(None, ge=0, le=ANGLE_SIZE_MAX,
+                                      description="std on the joint encoders phi1, phi2 [rad]; null: angle_noise")
+    position_quantum: float = Field(0.0, ge=0, le=POSITION_SIZE_MAX, description="[m], 0: none")
+    angle_quantum: float = Field(0.0, ge=0, le=ANGLE_SIZE_MAX, description="[rad], 0: none")
     delay: int = Field(0, ge=0, le=1, description="samples of measurement delay: 0 or 1")
     velocity_sensor: bool = False
-    velocity_noise: float = Field(0.0, ge=0, description="std [m/s, rad/s] (with velocity_sensor)")
+    velocity_noise: float = Field(0.0, ge=0, le=VELOCITY_NOISE_MAX, description="std [m/s, rad/s] (with velocity_sensor)")
+
+    @model_validator(mode="after")
+    def _tiny(self) -> "Sensors":
+        issues = []
+        for key in ("position_noise", "angle_noise", "attitude_noise", "joint_noise", "position_quantum",
+                    "angle_quantum", "velocity_noise"):
+            v = getattr(self, key)
+            if v is not None and 0 < v < SIZE_MIN:
+                issues.append(((key,), f"must be 0 (off) or at least {SIZE_MIN:g}", v))
+        if issues:
+            raise _Issues(issues)
+        return self
 
 
 class ControllerSection(_Section):
@@ -411,6 +503,9 @@ class ControllerSection(_Section):
 
     name: str = Field("rac_dob", description="one of uvms_mj.controllers.available()")
     params: dict[str, Any] = Field(default_factory=dict, description="keyword arguments of the controller")
+    base_reference: Literal["measured", "truth", "nominal"] = Field(
+        "measured", description="the base's reference pose: the first (noisy) measurement, the plant's true "
+        "initial pose, or the model file's initial pose (keyframe paper_initial)")
 
     @field_validator("name")
     @classmethod
@@ -425,18 +520,26 @@ class ControllerSection(_Section):
         issues = _check_controller_params(self.name, self.params)
         if issues:
             raise _Issues([(("params",) + p, m, v) for p, m, v in issues])
+        if self.base_reference != "measured":
+            named, _ = _controller_signature(self.name)
+            if "base_reference" not in named:
+                raise _Issues([(("base_reference",), f"controller {self.name!r} takes no base reference; "
+                                "allowed: measured", self.base_reference)])
+            if self.params.get("base_reference") is not None:
+                raise _Issues([(("base_reference",), "give either base_reference or params.base_reference, "
+                                "not both", self.base_reference)])
         return self
 
 
 class Trajectory(_Section):
     """Straight end-tip line (:class:`uvms_mj.trajectory.StraightLine`)."""
 
-    target: Vec2 | None = Field(None, description="end point, world [x, y] [m]")
-    displacement: Vec2 | None = Field(None, description="end point minus the initial tip position [m]; "
+    target: LengthVec2 | None = Field(None, description="end point, world [x, y] [m]")
+    displacement: LengthVec2 | None = Field(None, description="end point minus the initial tip position [m]; "
                                       "default [0.3, 0.0] when target is not given")
-    cruise_speed: float = Field(0.02, gt=0, description="[m/s]")
-    accel: float = Field(0.02, gt=0, description="[m/s^2]")
-    t_start: float = Field(1.0, ge=0, description="rest before moving [s]")
+    cruise_speed: float = Field(0.02, ge=SIZE_MIN, le=SPEED_MAX, description="[m/s]")
+    accel: float = Field(0.02, ge=SIZE_MIN, le=ACCEL_MAX, description="[m/s^2]")
+    t_start: float = Field(1.0, ge=0, le=DURATION_MAX, description="rest before moving [s]")
 
     @model_validator(mode="after")
     def _one_end(self) -> "Trajectory":
@@ -451,22 +554,35 @@ class Trajectory(_Section):
 class Outputs(_Section):
     """What a run writes."""
 
-    log: str | None = Field(None, description="MCAP path; null: logs/<name>-<controller>.mcap")
+    log: str | None = Field(None, min_length=1, max_length=4096,
+                            description="MCAP path; null: logs/<name>-<controller>.mcap")
     video: bool = False
-    video_fps: int = Field(30, gt=0)
-    video_size: Annotated[list[Annotated[int, Field(gt=0)]], Field(min_length=2, max_length=2)] = Field(
-        default_factory=lambda: [640, 480], description="[width, height] pixels")
+    video_fps: int = Field(30, ge=1, le=VIDEO_FPS_MAX)
+    video_size: Annotated[list[int], Field(min_length=2, max_length=2)] = Field(
+        default_factory=lambda: [640, 480], description="[width, height] pixels, even, 16 to 3840 x 2160")
     plots: bool = True
+
+    @field_validator("video_size")
+    @classmethod
+    def _size(cls, v: list[int]) -> list[int]:
+        issues = []
+        for i, (n, hi) in enumerate(zip(v, VIDEO_SIZE_MAX)):
+            if not 16 <= n <= hi or n % 2:
+                issues.append(((i,), f"must be an even number of pixels from 16 to {hi} "
+                                     "(H.264 needs even sizes)", n))
+        if issues:
+            raise _Issues(issues)
+        return v
 
 
 class Scenario(_Section):
     """A whole scenario (defaults: the paper experiment)."""
 
-    name: str = Field("scenario", pattern=r"^[A-Za-z0-9][A-Za-z0-9_.-]*$",
+    name: str = Field("scenario", pattern=r"^[A-Za-z0-9][A-Za-z0-9_.-]*$", max_length=NAME_MAX,
                       description="letters, digits, _ . -; default in files: the file name")
-    description: str = ""
-    duration: float = Field(40.0, gt=0, description="simulated time [s]")
-    seed: int = Field(0, ge=0, description="random seed of the sensor noise")
+    description: str = Field("", max_length=DESCRIPTION_MAX)
+    duration: float = Field(40.0, gt=0, le=DURATION_MAX, description="simulated time [s]")
+    seed: int = Field(0, ge=0, le=SEED_MAX, description="random seed of the sensor noise")
     physics: Physics = Field(default_factory=Physics)
     plant: PlantSection = Field(default_factory=PlantSection)
     thrusters: Thrusters = Field(default_factory=Thrusters)
@@ -481,10 +597,22 @@ class Scenario(_Section):
     def _period(self) -> "Scenario":
         T = controller_period(self)
         dt = self.physics.timestep
+        if not (math.isfinite(T) and PERIOD_RANGE[0] <= T <= PERIOD_RANGE[1]):
+            raise _Issues([(("controller", "params", "T"),
+                            f"the controller period must be within [{PERIOD_RANGE[0]:g}, {PERIOD_RANGE[1]:g}] s", T)])
         sub = T / dt
-        if not (math.isfinite(T) and T > 0) or abs(sub - round(sub)) > 1e-9 or round(sub) < 1:
+        if abs(sub - round(sub)) > 1e-9 or round(sub) < 1:
             raise _Issues([(("controller", "params", "T"),
                             f"the controller period must be a whole multiple of physics.timestep = {dt!r} s", T)])
+        # The thrusters' first-order lag is integrated by the plant's integrator: explicitly (Euler;
+        # RK4 with its larger stability region), so dt / tau beyond the integrator's bound diverges.
+        bound = LAG_STABILITY[self.physics.integrator]
+        tau = self.thrusters.tau
+        if dt / tau >= bound:
+            raise _Issues([(("thrusters", "tau"),
+                            f"unstable with the {self.physics.integrator} integrator at physics.timestep = "
+                            f"{dt:.6g} s: the lag integrates stably only for tau > timestep / {bound} = "
+                            f"{dt / bound:.6g} s", tau)])
         return self
 
 
@@ -536,8 +664,52 @@ def validate_scenario(data: Any, source: str = "<scenario>") -> Scenario:
         raise ScenarioError(_format(exc, source)) from None
 
 
+#: Limits on scenario files (a scenario is a few kB): size, nesting depth; aliases are refused.
+FILE_SIZE_MAX = 1 << 20  # bytes
+DEPTH_MAX = 32  # nested mappings / lists
+
+
 class _Loader(yaml.SafeLoader):
-    """safe_load that rejects duplicate keys (YAML keeps the last one silently)."""
+    """safe_load that rejects duplicate keys (YAML keeps the last one silently), aliases
+    (``*name``: alias bombs, recursive structures) and nesting deeper than :data:`DEPTH_MAX`, and
+    reports bad values of explicit tags (``!!float 'abc'``) and over-long integers as YAML errors
+    with their line."""
+
+    _depth = 0
+
+    def compose_node(self, parent, index):  # noqa: ANN001 - PyYAML's signature
+        if self.check_event(yaml.events.AliasEvent):
+            event = self.peek_event()
+            raise yaml.composer.ComposerError(
+                None, None, f"aliases (*{event.anchor}) are not allowed in scenario files; write the value out",
+                event.start_mark)
+        if self._depth >= DEPTH_MAX:
+            event = self.peek_event()
+            raise yaml.composer.ComposerError(
+                None, None, f"nesting deeper than {DEPTH_MAX} levels", event.start_mark)
+        self._depth += 1
+        try:
+            return super().compose_node(parent, index)
+        finally:
+            self._depth -= 1
+
+
+def _checked(construct: Callable) -> Callable:
+    def wrapped(loader: _Loader, node: yaml.Node) -> Any:
+        try:
+            return construct(loader, node)
+        except (ValueError, OverflowError) as exc:
+            raise yaml.constructor.ConstructorError(
+                None, None, f"bad {node.tag.rsplit(':', 1)[-1]} value {_fmt_value(node.value)}: "
+                f"{str(exc).splitlines()[0] if str(exc) else type(exc).__name__}", node.start_mark) from None
+
+    return wrapped
+
+
+for _tag, _construct in list(yaml.SafeLoader.yaml_constructors.items()):
+    if _tag is not None and _tag.startswith("tag:yaml.org,2002:") and _tag.rsplit(":", 1)[-1] in (
+            "int", "float", "bool", "binary", "timestamp", "null", "str"):
+        _Loader.add_constructor(_tag, _checked(_construct))
 
 
 def _construct_mapping(loader: _Loader, node: yaml.MappingNode, deep: bool = False) -> dict:
@@ -580,6 +752,8 @@ def _yaml_load(text: str, source: str) -> Any:
         raise ScenarioError(f"{where}: {kind}{line}: {what}") from None
     except yaml.YAMLError as exc:
         raise ScenarioError(f"{source}: YAML error: {exc}") from None
+    except (ValueError, OverflowError, RecursionError, MemoryError) as exc:
+        raise ScenarioError(f"{source}: YAML error: {type(exc).__name__}: {str(exc)[:200]}") from None
 
 
 #: Free-form mappings whose keys contain dots: inside them a --set path is one key.
@@ -599,7 +773,7 @@ def apply_sets(raw: dict, sets: Sequence[str]) -> dict:
                                 "trajectory.displacement=[0.2,0]")
         try:
             value = yaml.load(text, Loader=_Loader)  # noqa: S506 - a SafeLoader subclass
-        except yaml.YAMLError as exc:
+        except (yaml.YAMLError, ValueError, OverflowError, RecursionError) as exc:
             raise ScenarioError(f"--set {item!r}: the value is not valid YAML: "
                                 f"{getattr(exc, 'problem', None) or exc}") from None
         node, path, i = out, [], 0
@@ -638,11 +812,17 @@ def load_scenario(path: str | Path, sets: Sequence[str] = ()) -> Scenario:
     p = Path(path)
     source = str(p)
     try:
-        text = p.read_text(encoding="utf-8")
+        with open(p, "rb") as f:
+            data = f.read(FILE_SIZE_MAX + 1)
+        if len(data) > FILE_SIZE_MAX:
+            raise ScenarioError(f"{source}: larger than {FILE_SIZE_MAX // 1024} KiB: not a scenario file")
+        text = data.decode("utf-8")
     except FileNotFoundError:
         raise ScenarioError(f"{source}: no such scenario file") from None
     except (OSError, UnicodeDecodeError) as exc:
         raise ScenarioError(f"{source}: cannot read the scenario file: {exc}") from None
+    if "\0" in text:
+        raise ScenarioError(f"{source}: contains NUL bytes: not a scenario file (YAML text)")
     raw = _yaml_load(text, source)
     if raw is None:
         raw = {}
@@ -776,16 +956,56 @@ def build(scenario: Scenario) -> tuple[Plant, Any]:
         target = np.asarray(tr.target, dtype=float) if tr.target is not None else start + np.asarray(tr.displacement)
         path = StraightLine(start=tuple(float(v) for v in start), target=tuple(float(v) for v in target),
                             cruise_speed=tr.cruise_speed, accel=tr.accel, t_start=tr.t_start)
-        ctrl = create(scenario.controller.name, trajectory=path, nominal=nominal, **scenario.controller.params)
+        params = dict(scenario.controller.params)
+        ref = scenario.controller.base_reference
+        if ref == "truth":
+            params["base_reference"] = [float(v) for v in plant.q[:3]]
+        elif ref == "nominal":
+            params["base_reference"] = [float(v) for v in _nominal_initial_pose()]
+        ctrl = create(scenario.controller.name, trajectory=path, nominal=nominal, **params)
     except (ParameterError, ControllerError, ValueError) as exc:
         raise ScenarioError(f"scenario {scenario.name!r}: {exc}") from None
     return plant, ctrl
+
+
+@lru_cache(maxsize=1)
+def _nominal_initial_pose() -> tuple[float, float, float]:
+    """The base pose (x, y, phi0) of the robot model file's initial keyframe (paper_initial)."""
+    m = _robot_file_model()
+    d = mujoco.MjData(m)
+    k = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, "paper_initial")
+    if k >= 0:
+        mujoco.mj_resetDataKeyframe(m, d, k)
+    return tuple(float(v) for v in d.qpos[:3])
+
+
+#: With sensors.delay = 1, the built-in RAC controllers stay stable only for Gamma and Lambda
+#: entries up to this (measured on the paper scenario over 10 s: 0.15 holds, 0.2 diverges at
+#: 2.8 s, the paper's 0.3 at 0.9 s).
+DELAY_GAIN_MARGIN = 0.15
+
+
+def scenario_warnings(scenario: Scenario) -> list[str]:
+    """Warnings about valid but known-unstable combinations (one line each, naming the field)."""
+    out = []
+    c, s = scenario.controller, scenario.sensors
+    if s.delay and c.name in ("rac", "rac_dob"):
+        named, _ = _controller_signature(c.name)
+        gains = {k: c.params.get(k, named[k].default if k in named else 0.0) for k in ("gamma", "lam")}
+        g = max(float(np.max(np.asarray(v, dtype=float))) for v in gains.values())
+        if g > DELAY_GAIN_MARGIN:
+            out.append(f"sensors.delay = 1 with controller {c.name!r} and gains up to {g:g} (gamma, lam): "
+                       "known to diverge within a few seconds; with one sample of delay the loop stays stable "
+                       f"only for gains up to about {DELAY_GAIN_MARGIN:g} (measured on the paper scenario: 0.15 "
+                       "holds, 0.2 diverges at 2.8 s, the paper's 0.3 at 0.9 s)")
+    return out
 
 
 def sensor_model(scenario: Scenario) -> SensorModel:
     """The scenario's sensors as a :class:`~uvms_mj.loop.SensorModel`."""
     s = scenario.sensors
     return SensorModel(position_noise=s.position_noise, angle_noise=s.angle_noise,
+                       attitude_noise=s.attitude_noise, joint_noise=s.joint_noise,
                        position_quantum=s.position_quantum, angle_quantum=s.angle_quantum, delay=s.delay,
                        velocity_sensor=s.velocity_sensor, velocity_noise=s.velocity_noise)
 

@@ -163,6 +163,10 @@ RAY_MISSING = ("--engine ray needs Ray, which is not installed: pip install 'uvm
                "(or pip install ray); the default --engine process needs nothing more")
 MAX_ATTEMPTS = 3
 FORMAT = 1
+#: Largest linspace(...) count and largest number of runs in one sweep (checked before anything
+#: is allocated or run).
+MAX_GRID = 10_000
+MAX_RUNS = 100_000
 
 
 class SweepError(ValueError):
@@ -429,6 +433,8 @@ def _call(node) -> Grid | Random | Scale:
         n = int(nn[1])
         if n < 1:
             raise _SpecSyntax(f"{sig}: empty range: n must be >= 1 (got {n})")
+        if n > MAX_GRID:
+            raise _SpecSyntax(f"{sig}: n = {n} values is too many; at most {MAX_GRID}")
         if n > 1 and a == b:
             raise _SpecSyntax(f"{sig}: empty range: start == stop == {a!r} (use a single value)")
         return Grid(tuple(float(v) for v in np.linspace(a, b, n)), source=f"linspace({a!r}, {b!r}, {n})")
@@ -709,6 +715,9 @@ def sample_count(varies: Sequence[Vary], n: int | None) -> tuple[int, int]:
                          "(at each grid point, if there are grids too)")
     if n is not None and n < 1:
         raise SweepError(f"--n must be >= 1 (got {n})")
+    if points * (n or 1) > MAX_RUNS:
+        raise SweepError(f"{points} grid points x {n or 1} samples = {points * (n or 1)} samples: at most "
+                         f"{MAX_RUNS} in one sweep")
     return points, (n or 1)
 
 
@@ -1018,9 +1027,48 @@ def _one_line(text: str, limit: int = 400) -> str:
     return s if len(s) <= limit else s[:limit - 3] + "..."
 
 
+#: The sweep's process, in a worker of the process engine (None elsewhere).
+_PARENT_PID: int | None = None
+
+
+def _parent_gone() -> bool:
+    return _PARENT_PID is not None and os.getppid() != _PARENT_PID
+
+
+def _watch_parent() -> None:
+    while True:
+        time.sleep(0.5)
+        if _parent_gone():
+            os._exit(1)
+
+
+def _worker_init(parent: int) -> None:
+    """Initializer of the process engine's workers: a worker ends with its sweep, even after
+    ``kill -9`` of the sweep (Linux: PR_SET_PDEATHSIG; everywhere: a thread polling
+    os.getppid() every 0.5 s, and a check before each run)."""
+    global _PARENT_PID
+    import signal
+    import sys
+    import threading
+
+    _PARENT_PID = parent
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+
+            ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG
+        except (OSError, AttributeError):
+            pass
+    if _parent_gone():
+        os._exit(1)
+    threading.Thread(target=_watch_parent, name="uvms-mj-parent-watch", daemon=True).start()
+
+
 def execute_run(task: dict) -> dict:
     """Run one task (in a worker): never raises for a failing run; returns status, reason,
     metrics, t_end, wall_s."""
+    if _parent_gone():
+        os._exit(1)
     t0 = time.perf_counter()
     out: dict[str, Any] = {"status": "error", "reason": "", "metrics": {}, "t_end": float("nan")}
     try:
@@ -1080,7 +1128,8 @@ def _engine_process(tasks: list[dict], workers: int, done: Callable[[dict, dict]
     queue = list(tasks)
     attempts: dict[str, int] = {}
     while queue:
-        pool = ProcessPoolExecutor(max_workers=max(1, min(workers, len(queue))), mp_context=ctx)
+        pool = ProcessPoolExecutor(max_workers=max(1, min(workers, len(queue))), mp_context=ctx,
+                                   initializer=_worker_init, initargs=(os.getpid(),))
         try:
             futs = {pool.submit(execute_run, t): t for t in queue}
             queue = []
