@@ -176,5 +176,25 @@ def test_default_backend_chosen_in_child(tmp_path: Path) -> None:
     assert "Exception ignored" not in proc.stderr, proc.stderr
 
 
+@pytest.mark.parametrize("extra, expect", [
+    ({"DISPLAY": ":99"}, "None"),            # a display: MuJoCo's GLFW default, nothing set
+    ({"WAYLAND_DISPLAY": "wayland-9"}, "None"),
+    ({"MUJOCO_GL": "osmesa"}, "osmesa"),     # the user's choice is kept
+    ({}, "egl"),                             # headless, unset: a headless backend
+])
+def test_configure_gl_only_chooses_for_headless(extra: dict, expect: str) -> None:
+    env = {k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "PYOPENGL_PLATFORM", "DISPLAY",
+                                                           "WAYLAND_DISPLAY")}
+    env.update(extra)
+    code = ("import os, sys; from uvms_mj.render import configure_gl; configure_gl(); "
+            "print(os.environ.get('MUJOCO_GL'))")
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
+    got = proc.stdout.strip()
+    if expect == "egl":
+        assert got in ("egl", "osmesa"), proc.stdout + proc.stderr
+    else:
+        assert got == expect, proc.stdout + proc.stderr
+
+
 def test_render_error_type() -> None:
     assert issubclass(RenderError, RuntimeError)

@@ -9,7 +9,8 @@ underwater robot with 2 link manipulator": a floating base with 3 thrusters carr
     >>> plant.step(120)          # 1 s at the default 1/120 s step (RK4)
 """
 
-# Choose a headless OpenGL backend (MUJOCO_GL) before anything imports mujoco; see render.py.
+# Without a display and without a user choice, pick a headless OpenGL backend (MUJOCO_GL)
+# before anything imports mujoco; with a display, or MUJOCO_GL set, nothing changes (render.py).
 from .render import configure_gl as _configure_gl
 
 _configure_gl()

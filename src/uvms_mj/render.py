@@ -13,8 +13,11 @@ MuJoCo picks its OpenGL backend from ``$MUJOCO_GL`` once, when ``mujoco`` is fir
 ``import mujoco`` itself fails when that backend's library is missing. ``uvms_mj/__init__.py``
 therefore calls :func:`configure_gl` before anything imports mujoco:
 
-* ``MUJOCO_GL`` unset (Linux): ``egl`` if ``libEGL.so.1`` and ``libOpenGL.so.0`` (or ``libGL``)
-  load, else ``osmesa`` if ``libOSMesa`` loads, else left unset (MuJoCo's GLFW default);
+* ``MUJOCO_GL`` unset (Linux) and no display (neither ``DISPLAY`` nor ``WAYLAND_DISPLAY``):
+  ``egl`` if ``libEGL.so.1`` and ``libOpenGL.so.0`` (or ``libGL``) load, else ``osmesa`` if
+  ``libOSMesa`` loads, else left unset (MuJoCo's GLFW default);
+* ``MUJOCO_GL`` unset with a display: left unset, so the process (and its children, viewers
+  included) keeps MuJoCo's GLFW default; the user's choice, when set, is never replaced;
 * ``MUJOCO_GL`` set to a value MuJoCo rejects, or to ``egl``/``osmesa`` whose library cannot be
   loaded: mujoco is imported with rendering disabled (so simulation keeps working), the user's
   value is put back, and the problem is remembered.
@@ -102,6 +105,8 @@ def configure_gl() -> None:
     raw = os.environ.get("MUJOCO_GL")
     value = (raw or "").strip().lower()
     if not value:
+        if not _headless():
+            return  # a display: MuJoCo's GLFW default works, and the process keeps its own choice
         for backend in ("egl", "osmesa"):
             if not _missing_libs(backend):
                 os.environ["MUJOCO_GL"] = backend
