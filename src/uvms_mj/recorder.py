@@ -1163,20 +1163,39 @@ def format_info(info: Mapping[str, Any]) -> str:
     if "git_commit" in meta:
         dirty = " (dirty)" if meta.pop("git_dirty", False) else ""
         lines.append(f"git:       {meta.pop('git_commit')}{dirty}")
+    def add_mapping(items: Mapping[str, Any]) -> None:
+        for k, v in items.items():
+            if isinstance(v, Mapping) and v:  # e.g. the resolved scenario: indented YAML
+                import yaml
+
+                text = yaml.safe_dump(json.loads(json.dumps(v, default=str)), sort_keys=False,
+                                      default_flow_style=None, width=100)
+                lines.append(f"  {k}:")
+                lines.extend("    " + line for line in text.rstrip("\n").splitlines())
+            else:
+                lines.append(f"  {k}: {json.dumps(v, sort_keys=True, default=str)}")
+
     if meta:
         lines.append("metadata:")
-        for k, v in meta.items():
-            text = json.dumps(v, sort_keys=True, default=str)
-            lines.append(f"  {k}: {text if len(text) <= 100 else text[:97] + '...'}")
+        add_mapping(meta)
     extra = {k: v for k, v in info.get("status_record", {}).items() if k not in ("status", "reason")}
     if extra:
-        lines.append("run:       " + ", ".join(f"{k}={v}" for k, v in extra.items()))
+        flat = {k: v for k, v in extra.items() if not isinstance(v, Mapping)}
+        if flat:
+            lines.append("run:       " + ", ".join(f"{k}={v}" for k, v in flat.items()))
+        nested = {k: v for k, v in extra.items() if isinstance(v, Mapping)}
+        if nested:
+            lines.append("run metadata:")
+            add_mapping(nested)
     lines.append("channels:")
     width = max((len(c["topic"]) for c in info["channels"]), default=5)
     for c in info["channels"]:
         lines.append(f"  {c['topic']:<{width}}  {c['messages']:>7} msgs  {c['schema']} "
                      f"({c['message_encoding']}/{c['schema_encoding']})")
     if info.get("signals"):
-        lines.append("signals:   " + ", ".join(
-            f"{n}{tuple(s['shape']) if s['shape'] else ''}" for n, s in info["signals"].items()))
+        import textwrap
+
+        lines.extend(textwrap.wrap(", ".join(f"{n}{tuple(s['shape']) if s['shape'] else ''}"
+                                             for n, s in info["signals"].items()),
+                                   width=100, initial_indent="signals:   ", subsequent_indent=" " * 11))
     return "\n".join(lines)
