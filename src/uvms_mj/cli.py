@@ -327,23 +327,45 @@ def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str
 
 
 @main.command()
-@click.argument("log", type=click.Path(exists=True, dir_okay=False))
-@click.option("-o", "--output", type=click.Path(dir_okay=False), default=None, help="MP4 path (default: LOG.mp4).")
+@click.argument("logs", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False), metavar="LOG [LOG_B]")
+@click.option("-o", "--out", type=click.Path(dir_okay=False), default=None,
+              help="MP4 path (default: LOG.mp4; with --compare LOG-vs-LOG_B.mp4 next to LOG).")
+@click.option("--output", "out_old", type=click.Path(dir_okay=False), default=None, hidden=True)
+@click.option("--compare", is_flag=True,
+              help="Two logs side by side (same view), with an inset of both end-tip errors against time.")
 @click.option("--fps", type=click.IntRange(1, 120), default=30, show_default=True)
-@click.option("--size", type=(int, int), default=(640, 480), show_default=True, help="Width and height [px].")
-def render(log: str, output: str | None, fps: int, size: tuple[int, int]) -> None:
-    """Replay LOG's states in MuJoCo and render an MP4 off-screen (no re-simulation)."""
-    from .render import RenderError, render_video
+@click.option("--size", type=(int, int), default=None,
+              help="Width and height [px] (default 640 480; with --compare 1280 480, plus the inset).")
+@click.option("--labels/--no-labels", default=True, show_default=True,
+              help="Controller name, legend and scale bar on the frames.")
+def render(logs: tuple[str, ...], out: str | None, out_old: str | None, compare: bool, fps: int,
+           size: tuple[int, int] | None, labels: bool) -> None:
+    """Replay LOG's states in MuJoCo and render an MP4 off-screen (no re-simulation).
 
-    out = Path(output) if output else Path(log).with_suffix(".mp4")
-    run_log = _read(log)
+    With --compare, LOG and LOG_B side by side (e.g. rac and rac_dob)."""
+    from .render import RenderError, render_compare_video, render_video
+
+    out = out or out_old
+    if compare != (len(logs) == 2) or len(logs) > 2:
+        raise click.UsageError("give one LOG, or two with --compare")
+    first = Path(logs[0])
+    if compare:
+        path = Path(out) if out else first.with_name(f"{first.stem}-vs-{Path(logs[1]).stem}.mp4")
+    else:
+        path = Path(out) if out else first.with_suffix(".mp4")
+    runs = [_read(p) for p in logs]
     try:
-        with _progress(f"render {out.name}", "frame") as tick:
-            info = render_video(run_log, out, fps=fps, size=size, on_frame=tick)
+        with _progress(f"render {path.name}", "frame") as tick:
+            if compare:
+                info = render_compare_video(runs[0], runs[1], path, fps=fps, size=size or (1280, 480), on_frame=tick)
+            else:
+                info = render_video(runs[0], path, fps=fps, size=size or (640, 480), on_frame=tick, labels=labels)
     except RenderError as exc:
         click.echo(f"error: {exc}", err=True)
         sys.exit(EXIT_RENDER)
-    click.echo(f"video: {out} ({info['frames']} frames)")
+    except ValueError as exc:
+        raise click.UsageError(str(exc)) from None
+    click.echo(f"video: {path} ({info['frames']} frames)")
 
 
 @main.command(short_help="Paper-style time histories (Figs. 5 and 6) and control signals of LOG (PNG).")
