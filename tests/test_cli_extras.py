@@ -154,3 +154,24 @@ def test_drift_set_parses_yaml_like_run():
     assert a.output == b.output != c.output
     bad = runner.invoke(main, ["drift", "--set", "base.volume=[1, x]"])
     assert bad.exit_code == 2 and "number or a list of numbers" in bad.output
+
+
+def test_render_arguments(short_log, tmp_path):
+    runner = CliRunner()
+    two = runner.invoke(main, ["render", str(short_log), str(short_log)])  # two logs need --compare
+    assert two.exit_code == 2 and "--compare" in two.output
+    one = runner.invoke(main, ["render", "--compare", str(short_log)])
+    assert one.exit_code == 2
+    out = tmp_path / "ab.mp4"
+    ok = runner.invoke(main, ["render", "--compare", str(short_log), str(short_log), "-o", str(out),
+                              "--size", "160", "96", "--fps", "4"])
+    assert ok.exit_code == 0, ok.output
+    assert out.stat().st_size > 1000 and "video:" in ok.output
+
+
+def test_sweep_by_name(tmp_path):
+    result = CliRunner().invoke(main, ["sweep", "paper", "--vary", "plant.current[0]=[0, 0.05]", "--engine", "serial",
+                                       "--controllers", "rac", "--set", "duration=0.3",
+                                       "--out-dir", str(tmp_path / "sw")])
+    assert result.exit_code == 0, result.output
+    assert (tmp_path / "sw" / "results.csv").is_file()

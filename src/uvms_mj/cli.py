@@ -574,7 +574,7 @@ def drift(seconds: float, current: tuple[float, float], drag: str, overrides: tu
 @click.option("--out", "out_dir_old", type=click.Path(file_okay=False), default=None, hidden=True)
 @click.option("--logs/--no-logs", default=False, show_default=True,
               help="Write an MCAP log per run (about 1.8 MB and +50 % time per 40 s run).")
-@click.option("--fresh", is_flag=True, help="Delete the results of a different sweep in --out instead of refusing.")
+@click.option("--fresh", is_flag=True, help="Delete the results of a different sweep in --out-dir instead of refusing.")
 def sweep(scenario: str, varies: tuple[str, ...], n: int | None, workers: int | None, engine: str,
           controllers: str, seed: int, sets: tuple[str, ...], out_dir: str | None, out_dir_old: str | None,
           logs: bool, fresh: bool) -> None:
