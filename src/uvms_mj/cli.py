@@ -477,7 +477,7 @@ def paper(controllers: str, duration: float, thruster_lag: float | None, ideal: 
         raise click.BadParameter(f"unknown controller(s) {', '.join(unknown)}; registered: {', '.join(available())}",
                                  param_hint="--controllers")
     over = {} if thruster_lag is None else {"thrusters.tau": thruster_lag}
-    results = {}
+    results, states = {}, {}
     status = 0
     for name in names:
         try:
@@ -487,8 +487,8 @@ def paper(controllers: str, duration: float, thruster_lag: float | None, ideal: 
         if res.status != "ok":
             click.echo(f"{name}: {res.reason}", err=True)
             status = EXIT_DIVERGED
-        results[name] = metrics(res)
-    click.echo(metrics_table(results))
+        results[name], states[name] = metrics(res), res.status
+    click.echo(metrics_table(results, states))
     sys.exit(status)
 
 
