@@ -208,7 +208,7 @@ def _default_log(scenario, out: str | None, controller: str) -> Path:
     return Path("logs") / f"{scenario.name}-{controller}.mcap"
 
 
-def _video(log_path: Path, video_path: Path, scenario=None) -> None:
+def _video(log_path: Path, video_path: Path, scenario=None, echo=click.echo) -> None:
     from .render import RenderError, render_video
 
     log = _read(log_path)
@@ -221,7 +221,7 @@ def _video(log_path: Path, video_path: Path, scenario=None) -> None:
     except RenderError as exc:
         click.echo(f"error: {exc}", err=True)
         sys.exit(EXIT_RENDER)
-    click.echo(f"video: {video_path} ({info['frames']} frames)")
+    echo(f"video: {video_path} ({info['frames']} frames)")
 
 
 class _progress:
@@ -273,7 +273,7 @@ def run(scenario: str, sets: tuple[str, ...], out: str | None, video: bool | Non
         for p in plot_run(read_log(log), log.parent, stem=log.stem):
             echo(f"plot: {p}")
     if video if video is not None else sc.outputs.video:
-        _video(log, log.with_suffix(".mp4"), sc)
+        _video(log, log.with_suffix(".mp4"), sc, echo=echo)
     if res.status != "ok":
         click.echo(f"error: {res.reason}", err=True)
         sys.exit(EXIT_DIVERGED)
@@ -315,7 +315,7 @@ def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str
         if res.status != "ok":
             failed.append(f"{name}: {res.reason}")
         if video:
-            _video(path, path.with_suffix(".mp4"), sc)
+            _video(path, path.with_suffix(".mp4"), sc, echo=echo)
     echo(metrics_table(results, status))
     if json_out:
         _write_json(_json_metrics(runs, base.name), json_out)
