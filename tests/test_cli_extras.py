@@ -165,6 +165,9 @@ def test_render_arguments(short_log, tmp_path):
                               "--size", "160", "96", "--fps", "4"])
     assert ok.exit_code == 0, ok.output
     assert out.stat().st_size > 1000 and "video:" in ok.output
+    old = runner.invoke(main, ["render", str(short_log), "--output", str(tmp_path / "a.mp4"),  # hidden alias
+                               "--size", "160", "96", "--fps", "4"])
+    assert old.exit_code == 0 and (tmp_path / "a.mp4").is_file(), old.output
 
 
 def test_sweep_by_name(tmp_path):

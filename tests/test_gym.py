@@ -62,3 +62,11 @@ def test_module_style_id():
     env = gymnasium.make("uvms_mj.gym:uvms_mj/Tracking-v0", time_limit=0.1)
     assert env.action_space.shape == (5,)
     env.close()
+
+
+def test_rgb_array_render():
+    env = gymnasium.make("uvms_mj/Tracking-v0", time_limit=0.1, render_mode="rgb_array")
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.ndim == 3 and frame.shape[2] == 3 and frame.std() > 5  # not blank
+    env.close()
