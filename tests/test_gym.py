@@ -65,8 +65,19 @@ def test_module_style_id():
 
 
 def test_rgb_array_render():
-    env = gymnasium.make("uvms_mj/Tracking-v0", time_limit=0.1, render_mode="rgb_array")
-    env.reset(seed=0)
-    frame = env.render()
-    assert frame.ndim == 3 and frame.shape[2] == 3 and frame.std() > 5  # not blank
-    env.close()
+    """render_mode="rgb_array" (dm_control's renderer) in a fresh process, where importing
+    uvms_mj first chooses the headless backend (here mujoco was imported before uvms_mj)."""
+    import os
+    import subprocess
+    import sys
+
+    code = ("import gymnasium, uvms_mj.gym\n"
+            "env = gymnasium.make('uvms_mj/Tracking-v0', time_limit=0.1, render_mode='rgb_array')\n"
+            "env.reset(seed=0); f = env.render()\n"
+            "print(f.shape, float(f.std()))\n")
+    env = {k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "PYOPENGL_PLATFORM", "DISPLAY",
+                                                           "WAYLAND_DISPLAY")}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    shape, std = out.stdout.strip().rsplit(" ", 1)
+    assert shape == "(240, 320, 3)" and float(std) > 5  # not blank

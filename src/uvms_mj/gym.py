@@ -20,7 +20,8 @@ The end of an episode at the time limit is ``truncated``; a divergence is ``term
 
 Keyword arguments of ``gym.make`` go to :func:`uvms_mj.env.load` (``scenario``, ``time_limit``,
 ``random``, ``reward_weights``, ``torque_limit``...), except ``render_mode`` ("rgb_array":
-dm_control's off-screen render of the scene's first camera).
+dm_control's off-screen render of the scene's first camera; headless, import uvms_mj before
+mujoco or set MUJOCO_GL=egl yourself, since dm_control uses the backend mujoco was imported with).
 """
 
 from __future__ import annotations
