@@ -15,7 +15,7 @@ def kinetic_energy(plant: Plant) -> float:
 
 def test_energy_conserved_without_drag_and_gravity(rng):
     """10 s of coasting from a random state with RK4 at 1/600 s: total kinetic energy (rigid +
-    added) is conserved to 1e-8 relative. Without the J_dot term it drifts by ~10 % (mujoco-facts.md),
+    added) is conserved to 1e-8 relative. Without the J_dot term it drifts by ~10 % (docs/mujoco-notes.md),
     so this fails if any velocity term is missing or wrong."""
     plant = Plant(terms=HydroTerms(drag="off", buoyancy=False), gravity=False, integrator="rk4", timestep=1 / 600)
     plant.set_state(base_velocity=random_qd(rng)[:3] * 2, joint_velocities=random_qd(rng)[3:] * 2)

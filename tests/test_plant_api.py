@@ -25,7 +25,7 @@ def test_model_holds_table1():
         b = p.body(name)
         assert (b.mass, b.inertia, b.added_mass, b.added_inertia, b.drag_coef) == (m, inertia, am, ia, cd)
         np.testing.assert_allclose([2 * b.box_half[0], 2 * b.box_half[1], b.width], [lx, ly, width], rtol=1e-15)
-    assert p.joint1_offset == (0.1, 0.0)  # base frame (l0x / 2, 0), control-design.md
+    assert p.joint1_offset == (0.1, 0.0)  # base frame (l0x / 2, 0), docs/paper-reading.md
 
 
 def test_accessors_and_inputs():

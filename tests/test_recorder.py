@@ -173,8 +173,9 @@ def test_tf_reproduces_the_tip(recorded):
             tips.append(compose(tfs, ["world", "base", "link1", "link2", "tip"])[0])
         elif ch.topic == "/joint_states":
             js = json.loads(msg.data)
-            assert js["name"] == ["base_x", "base_y", "base_phi", "joint1", "joint2"]
-            joints.append((js["position"], js["velocity"]))
+            assert set(js) == {"timestamp", "joints"}
+            assert [j["name"] for j in js["joints"]] == ["base_x", "base_y", "base_phi", "joint1", "joint2"]
+            joints.append(([j["position"] for j in js["joints"]], [j["velocity"] for j in js["joints"]]))
     assert len(tips) == len(result.t)
     tips = np.array(tips)
     # The tip of the logged q_true, by MuJoCo's own kinematics: to 1e-9.
@@ -236,7 +237,7 @@ def test_channels_schemas_and_messages(recorded):
         "/tf": ("foxglove.FrameTransforms", n),
         "/scene": ("foxglove.SceneUpdate", 1),
         "/scene/paths": ("foxglove.SceneUpdate", 2),  # at t = 1 s and at close (t = 2 s)
-        "/joint_states": ("uvms_mj.JointStates", n),
+        "/joint_states": ("foxglove.JointStates", n),
         "/state/true": ("uvms_mj.TrueState", n),
         "/control": ("uvms_mj.ControlSample", n),
     }
@@ -248,8 +249,16 @@ def test_channels_schemas_and_messages(recorded):
     # The foxglove.* schemas in the file carry the published schemas' structure.
     with open(path, "rb") as f:
         schemas = {s.name: json.loads(s.data) for s in make_reader(f).get_summary().schemas.values()}
-    for name in ("foxglove.FrameTransforms", "foxglove.SceneUpdate"):
+    for name in ("foxglove.FrameTransforms", "foxglove.SceneUpdate", "foxglove.JointStates"):
         assert schemas[name]["title"] == name and schemas[name] == SCHEMAS[name]
+    # foxglove.JointStates as published (foxglove-sdk schemas/jsonschema/JointStates.json)
+    js = schemas["foxglove.JointStates"]
+    assert js["required"] == ["timestamp", "joints"]
+    assert list(js["properties"]["timestamp"]["properties"]) == ["sec", "nsec"]
+    joint = js["properties"]["joints"]["items"]
+    assert joint["title"] == "foxglove.JointState" and joint["required"] == ["name"]
+    assert {k: v["type"] for k, v in joint["properties"].items()} == {
+        "name": "string", "position": "number", "velocity": "number", "acceleration": "number", "effort": "number"}
     entity = schemas["foxglove.SceneUpdate"]["properties"]["entities"]["items"]
     assert set(entity["required"]) == {"timestamp", "frame_id", "id", "lifetime", "frame_locked", "metadata",
                                        "arrows", "cubes", "spheres", "cylinders", "lines", "triangles",
@@ -314,8 +323,8 @@ def test_metadata(recorded):
     import mujoco
 
     assert versions["mujoco"] == mujoco.__version__ and versions["numpy"] == np.__version__
-    if "git_commit" in log.meta:  # present when running from a git checkout
-        commit = log.meta["git_commit"]
+    commit = log.meta["git_commit"]  # always there: from git, from the wheel, or "unknown"
+    if commit != "unknown":
         assert len(commit) == 40 and int(commit, 16) >= 0
         assert isinstance(log.meta["git_dirty"], bool)
     assert log.meta["robot_params"]["tip_offset"] == list(params.tip_offset)
@@ -573,3 +582,68 @@ def test_a_signal_during_a_write_waits_for_the_write(tmp_path, params):
     assert len(calls) >= 4  # /control, /state/true, /tf, /joint_states (+ the paths at close)
     log = read_log(path)
     assert len(log.t) == 2 and log.status == "interrupted" and "SIGTERM" in log.reason
+
+
+def test_git_commit_outside_a_checkout(monkeypatch):
+    """Not in a git checkout: the commit written into the wheel at build time, else "unknown"."""
+    import sys as _sys
+    import types
+
+    from uvms_mj import recorder
+
+    monkeypatch.setattr(recorder, "_git_checkout_info", lambda: {})
+    monkeypatch.setitem(_sys.modules, "uvms_mj._build_info", None)  # no build info: import fails
+    assert recorder._git_info() == {"git_commit": "unknown"}
+    built = types.ModuleType("uvms_mj._build_info")
+    built.GIT_COMMIT, built.GIT_DIRTY = "a" * 40, False
+    monkeypatch.setitem(_sys.modules, "uvms_mj._build_info", built)
+    import uvms_mj
+
+    monkeypatch.setattr(uvms_mj, "_build_info", built, raising=False)
+    assert recorder._git_info() == {"git_commit": "a" * 40, "git_dirty": False}
+    assert recorder.provenance()["git_commit"] == "a" * 40
+
+
+def test_legacy_joint_states_log_reads_back(recorded, tmp_path):
+    """A log written before foxglove.JointStates (uvms_mj.JointStates with name/position/velocity
+    arrays on /joint_states) reads back exactly like the new one."""
+    from mcap.writer import Writer
+
+    from uvms_mj.recorder import LEGACY_JOINT_STATES
+
+    path, result, _, _ = recorded
+    old = tmp_path / "old.mcap"
+    legacy_schema = {"title": LEGACY_JOINT_STATES, "type": "object", "properties": {
+        "timestamp": {"type": "object"}, "name": {"type": "array"}, "position": {"type": "array"},
+        "velocity": {"type": "array"}}}
+    with open(path, "rb") as f, open(old, "wb") as g:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        w = Writer(g)
+        w.start()
+        sids, cids = {}, {}
+        for sid, sc in summary.schemas.items():
+            if sc.name == "foxglove.JointStates":
+                sids[sid] = w.register_schema(LEGACY_JOINT_STATES, "jsonschema", json.dumps(legacy_schema).encode())
+            else:
+                sids[sid] = w.register_schema(sc.name, sc.encoding, sc.data)
+        for cid, ch in summary.channels.items():
+            cids[cid] = w.register_channel(ch.topic, ch.message_encoding, sids[ch.schema_id], ch.metadata)
+        for sc, ch, msg in reader.iter_messages(log_time_order=False):
+            data = msg.data
+            if ch.topic == "/joint_states":
+                js = json.loads(data)
+                data = json.dumps({"timestamp": js["timestamp"], "name": [j["name"] for j in js["joints"]],
+                                   "position": [j["position"] for j in js["joints"]],
+                                   "velocity": [j["velocity"] for j in js["joints"]]}).encode()
+            w.add_message(cids[ch.id], msg.log_time, data, msg.publish_time, msg.sequence)
+        for m in reader.iter_metadata():
+            w.add_metadata(m.name, m.metadata)
+        w.finish()
+    new, legacy = read_log(path), read_log(old)
+    assert np.array_equal(new.t, legacy.t) and new.status == legacy.status
+    assert set(new.signals) == set(legacy.signals)
+    for k in new.signals:
+        assert np.array_equal(new.signals[k], legacy.signals[k], equal_nan=True), k
+    chans = {c["topic"]: c["schema"] for c in log_info(old)["channels"]}
+    assert chans["/joint_states"] == LEGACY_JOINT_STATES

@@ -176,5 +176,65 @@ def test_default_backend_chosen_in_child(tmp_path: Path) -> None:
     assert "Exception ignored" not in proc.stderr, proc.stderr
 
 
+@pytest.mark.parametrize("extra, expect", [
+    ({"DISPLAY": ":99"}, "None"),            # a display: MuJoCo's GLFW default, nothing set
+    ({"WAYLAND_DISPLAY": "wayland-9"}, "None"),
+    ({"MUJOCO_GL": "osmesa"}, "osmesa"),     # the user's choice is kept
+    ({}, "egl"),                             # headless, unset: a headless backend
+])
+def test_configure_gl_only_chooses_for_headless(extra: dict, expect: str) -> None:
+    env = {k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "PYOPENGL_PLATFORM", "DISPLAY",
+                                                           "WAYLAND_DISPLAY")}
+    env.update(extra)
+    code = ("import os, sys; from uvms_mj.render import configure_gl; configure_gl(); "
+            "print(os.environ.get('MUJOCO_GL'))")
+    proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
+    got = proc.stdout.strip()
+    if expect == "egl":
+        assert got in ("egl", "osmesa"), proc.stdout + proc.stderr
+    else:
+        assert got == expect, proc.stdout + proc.stderr
+
+
 def test_render_error_type() -> None:
     assert issubclass(RenderError, RuntimeError)
+
+
+def test_labels_scale_bar_and_name(run) -> None:
+    """Labels (controller name top right, legend bottom left, scale bar bottom right) change only
+    their corners; the scale bar has the length of the plane of motion's metres."""
+    from uvms_mj.render import _labels_overlay, _nice_length
+
+    plain = next(iter(render_frames(run, fps=10, size=SIZE, labels=False)))[1].copy()
+    labelled = next(iter(render_frames(run, fps=10, size=SIZE)))[1].copy()
+    diff = np.abs(labelled.astype(int) - plain.astype(int)).max(axis=2) > 40
+    h, w = diff.shape
+    assert diff[: h // 4, 3 * w // 4:].any()        # name
+    assert diff[3 * h // 4:, : w // 3].any()        # legend
+    assert diff[3 * h // 4:, 2 * w // 3:].any()     # scale bar
+    assert not diff[h // 3: 2 * h // 3, w // 3: 2 * w // 3].any()  # the robot is untouched
+    assert _nice_length(0.37) == 0.2 and _nice_length(0.07) == 0.05 and _nice_length(1.0) == 1.0
+    ov = _labels_overlay(400, 300, None, 1000.0, legend=False)  # 1000 px/m: a 0.1 m bar = 100 px
+    img = np.zeros((300, 400, 3), np.uint8)
+    ov.apply(img)
+    white = img.min(axis=2) > 200
+    assert 98 <= white.sum(axis=1).max() <= 102  # the bar's rows (the label's rows are shorter)
+
+
+def test_compare_video_side_by_side(run, tmp_path: Path) -> None:
+    from uvms_mj.render import render_compare_video
+
+    other = PaperExperiment(duration=1.0, cruise_speed=0.3, controller="rac").run()  # shorter
+    out = tmp_path / "ab.mp4"
+    info = render_compare_video(other, run, out, fps=10, size=(320, 160))
+    assert info["frames"] == 20 and info["size"] == (320, 160 + 40)
+    reader = iio2.get_reader(out, format="FFMPEG")
+    try:
+        frames = [np.asarray(f) for f in reader]
+    finally:
+        reader.close()
+    assert len(frames) == 20 and frames[0].shape == (200, 320, 3)
+    last = frames[-1]
+    assert _orange(last[:160, :160]).sum() > 50 and _orange(last[:160, 160:]).sum() > 50  # two robots
+    # the inset's cursor moves with time
+    assert np.abs(frames[2][160:].astype(int) - frames[-1][160:].astype(int)).max() > 100

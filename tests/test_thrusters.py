@@ -16,7 +16,7 @@ def test_lag_reaches_63_percent_at_tau(integrator, steps, rtol):
     at dt = tau/12 and 4.6e-4 at the default dt = tau/2.4; explicit Euler is first order
     (2.4e-3 at tau/120)."""
     tau = Plant().params.thrusters[0].tau
-    assert tau == 0.02  # control-design.md default
+    assert tau == 0.02  # docs/paper-reading.md default
     plant = Plant(gravity=False, integrator=integrator, timestep=tau / steps)
     plant.set_thrust([10.0, -5.0, 2.0])
     plant.step(steps)
@@ -24,7 +24,7 @@ def test_lag_reaches_63_percent_at_tau(integrator, steps, rtol):
 
 
 def test_saturation_at_both_asymmetric_limits():
-    """Published characteristic at +-4 V: +15.978 N forward, -8.849 N reverse (control-design.md)."""
+    """Published characteristic at +-4 V: +15.978 N forward, -8.849 N reverse (docs/paper-reading.md)."""
     plant = Plant(gravity=False)
     for t in plant.params.thrusters:
         assert t.force_range == (-8.849, 15.978)

@@ -20,7 +20,8 @@ if _sys.argv and _os.path.basename(_sys.argv[0]) == "uvms-mj":
 
     _signal.signal(_signal.SIGINT, lambda *_: (_sys.stderr.write("interrupted\n"), _os._exit(130)))
 
-# Choose a headless OpenGL backend (MUJOCO_GL) before anything imports mujoco; see render.py.
+# Without a display and without a user choice, pick a headless OpenGL backend (MUJOCO_GL)
+# before anything imports mujoco; with a display, or MUJOCO_GL set, nothing changes (render.py).
 from .render import configure_gl as _configure_gl
 
 _configure_gl()

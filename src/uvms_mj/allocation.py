@@ -3,7 +3,7 @@
 The allocation matrix comes from the thruster sites of the (nominal) model: thruster i at base-
 frame position r_i, unit direction d_i, contributes d_i to the base-frame force and
 r_i x d_i to the torque. u_B (world frame: fx, fy, tau0) is rotated into the base frame and
-solved with the inverse of the 3x3 matrix (control-design.md, "Thrusters").
+solved with the inverse of the 3x3 matrix (docs/paper-reading.md, "Assumptions").
 """
 
 from __future__ import annotations

@@ -1,9 +1,14 @@
 """The ``uvms-mj`` command line.
 
-Commands: ``run``, ``compare``, ``render``, ``plot``, ``validate``, ``info`` (scenario files
-and logs), ``sweep`` (parameter sweeps, :mod:`uvms_mj.sweep`), ``paper`` (the paper's
-experiment without a scenario file), ``drift`` (the plant left to itself) and ``view`` (a
+Commands: ``run``, ``compare``, ``render``, ``plot``, ``validate``, ``info``, ``export``
+(scenario files and logs), ``sweep`` (parameter sweeps, :mod:`uvms_mj.sweep`), ``paper`` (the
+paper's experiment without a scenario file), ``drift`` (the plant left to itself) and ``view`` (a
 model file in MuJoCo's interactive viewer, in water).
+
+Output options: ``-o/--out PATH`` names an output file, ``--out-dir DIR`` an output folder
+(the older spellings ``--output``, ``compare/sweep --out DIR`` and ``plot -o DIR`` still work,
+hidden). SCENARIO arguments are a file, or the name of a scenario shipped with the package
+(``paper``, ``current``...: see ``uvms-mj validate --list``) when no such file exists.
 
 Exit codes: 0 success; 1 unexpected error (a run that raised: its log is closed with status
 "error" and the reason); 2 bad input (usage, scenario, parameters, an
@@ -44,11 +49,14 @@ METRIC_LABELS = {
 }
 
 
-def metrics_table(results: dict[str, dict[str, float]]) -> str:
-    """Side-by-side metrics; with two columns, the ratio second / first."""
+def metrics_table(results: dict[str, dict[str, float]], status: dict[str, str] | None = None) -> str:
+    """Side-by-side metrics; with two columns, the ratio second / first; with ``status``
+    (controller -> "ok", "diverged"...), a status row first."""
     names = list(results)
     ratio = len(names) == 2
     lines = [f"{'metric':<28}" + "".join(f"{n:>12}" for n in names) + (f"{'ratio':>9}" if ratio else "")]
+    if status is not None:
+        lines.append(f"{'status':<28}" + "".join(f"{status.get(n, '?'):>12}" for n in names))
     for key, label in METRIC_LABELS.items():
         vals = [results[n].get(key, float("nan")) for n in names]
         line = f"{label:<28}" + "".join(f"{v:>12.4g}" for v in vals)
@@ -113,6 +121,86 @@ def _warn(scenario) -> None:
         click.echo(f"warning: {w}", err=True)
 
 
+def _json_metrics(runs: dict[str, dict], scenario: str) -> dict:
+    """The machine-readable result of run/compare (see ``--json``)."""
+    out: dict = {"scenario": scenario, "runs": runs}
+    names = list(runs)
+    if len(names) == 2:
+        a, b = (runs[n]["metrics"] for n in names)
+        out["ratio"] = {"of": names[1], "to": names[0],
+                        "metrics": {k: (b[k] / a[k] if a.get(k) else None) for k in METRIC_LABELS if k in a and k in b}}
+    return out
+
+
+def _write_json(data: dict, dest: str) -> None:
+    """JSON to stdout ("-") or to a file; NaN and infinities become null."""
+    import json
+    import math
+
+    def clean(x):
+        if isinstance(x, float) and not math.isfinite(x):
+            return None
+        if isinstance(x, dict):
+            return {k: clean(v) for k, v in x.items()}
+        if isinstance(x, (list, tuple)):
+            return [clean(v) for v in x]
+        if isinstance(x, np.generic):
+            return clean(x.item())
+        return x
+
+    text = json.dumps(clean(data), indent=2, allow_nan=False)
+    if dest == "-":
+        click.echo(text)
+    else:
+        Path(dest).parent.mkdir(parents=True, exist_ok=True)
+        Path(dest).write_text(text + "\n")
+
+
+def scenarios_dir() -> Path:
+    """The scenario files shipped with the package (the repository's ``scenarios/`` in a checkout)."""
+    pkg = Path(__file__).resolve().parent
+    for cand in (pkg.parents[1] / "scenarios", pkg / "scenarios"):
+        if cand.is_dir() and any(cand.glob("*.yaml")):
+            return cand
+    return pkg / "scenarios"
+
+
+def packaged_scenarios() -> list[str]:
+    """Names of the packaged scenarios (``uvms-mj run NAME``)."""
+    return sorted(p.stem for p in scenarios_dir().glob("*.yaml"))
+
+
+class ScenarioPath(click.ParamType):
+    """A scenario file, or the name of a packaged scenario when no such file exists."""
+
+    name = "SCENARIO"
+
+    def convert(self, value, param, ctx):
+        p = Path(value)
+        if p.is_file():
+            return str(p)
+        if p.exists():
+            self.fail(f"{value!r} is not a file", param, ctx)
+        if p.name == str(value):  # a bare name: a packaged scenario
+            cand = scenarios_dir() / (value if value.endswith((".yaml", ".yml")) else f"{value}.yaml")
+            if cand.is_file():
+                return str(cand)
+        self.fail(f"{value!r}: no such file, nor a packaged scenario ({', '.join(packaged_scenarios())})",
+                  param, ctx)
+
+
+SCENARIO = ScenarioPath()
+
+
+def _json_dest(human_to_stderr: bool):
+    """click.echo for the human-readable lines: on stderr while --json - has stdout."""
+    return (lambda *a, **k: click.echo(*a, err=True, **k)) if human_to_stderr else click.echo
+
+
+_JSON_HELP = ("Also write the metrics (and status, reason, log of each run) as JSON: '-' for stdout (the "
+              "human-readable lines then go to stderr), or a file path.")
+
+
 @click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="uvms-mj")
 def main() -> None:
@@ -174,7 +262,7 @@ def _run_one(scenario, out: Path, progress: bool = True, source: str | None = No
     return res, out, metrics(res)
 
 
-def _plots(log_path: Path) -> None:
+def _plots(log_path: Path, echo=click.echo) -> None:
     """The plots of a run's log; a run too short (or too broken) to plot gets a warning."""
     from .plots import plot_run
 
@@ -186,7 +274,7 @@ def _plots(log_path: Path) -> None:
         click.echo(f"warning: no plots for {log_path}: {exc}", err=True)
         return
     for p in paths:
-        click.echo(f"plot: {p}")
+        echo(f"plot: {p}")
 
 
 def _read(path) -> object:
@@ -210,16 +298,14 @@ def _default_log(scenario, out: str | None, controller: str) -> Path:
     return Path("logs") / f"{scenario.name}-{controller}.mcap"
 
 
-def _video(log_path: Path, video_path: Path, scenario=None) -> None:
-    from .render import RenderError, render_video
-
+def _video(log_path: Path, video_path: Path, scenario=None, echo=click.echo) -> None:
     log = _read(log_path)
     kw = {}
     if scenario is not None:
         kw = {"fps": scenario.outputs.video_fps, "size": tuple(scenario.outputs.video_size)}
     _check_out(video_path, kind="video", magic=None)
     info = _render(log, video_path, log_path, **kw)
-    click.echo(f"video: {video_path} ({info['frames']} frames)")
+    echo(f"video: {video_path} ({info['frames']} frames)")
 
 
 def _render(log, video_path: Path, log_path, **kw) -> dict:
@@ -259,43 +345,54 @@ class _progress:
 
 
 @main.command()
-@click.argument("scenario", type=click.Path(exists=True, dir_okay=False))
+@click.argument("scenario", type=SCENARIO)
 @click.option("--set", "sets", multiple=True, metavar="KEY.PATH=VALUE",
               help="Override a scenario field, e.g. --set controller.name=rac --set plant.current=[0.1,0]")
-@click.option("--out", type=click.Path(dir_okay=False), default=None,
+@click.option("-o", "--out", type=click.Path(dir_okay=False), default=None,
               help="Log path (default: the scenario's outputs.log or logs/<name>-<controller>.mcap).")
 @click.option("--video/--no-video", default=None, help="Render an MP4 next to the log (default: outputs.video).")
 @click.option("--plots/--no-plots", default=None, help="Write PNG plots next to the log (default: outputs.plots).")
-def run(scenario: str, sets: tuple[str, ...], out: str | None, video: bool | None, plots: bool | None) -> None:
+@click.option("--json", "json_out", metavar="PATH|-", default=None, help=_JSON_HELP)
+def run(scenario: str, sets: tuple[str, ...], out: str | None, video: bool | None, plots: bool | None,
+        json_out: str | None) -> None:
     """Run SCENARIO, write its MCAP log and print a metrics table.
 
     Exits with 3 if the run diverged (the log is kept, with the reason)."""
+    echo = _json_dest(json_out == "-")
     sc = _load(scenario, sets)
     log = _default_log(sc, out, sc.controller.name)
     if video if video is not None else sc.outputs.video:
         _check_out(log.with_suffix(".mp4"), kind="video", magic=None)
     res, log, m = _run_one(sc, log, source=scenario)
-    click.echo(f"log: {log}")
-    click.echo(metrics_table({sc.controller.name: m}))
+    echo(f"log: {log}")
+    echo(metrics_table({sc.controller.name: m}, {sc.controller.name: res.status}))
+    if json_out:
+        _write_json(_json_metrics({sc.controller.name: {"status": res.status, "reason": res.reason, "log": str(log),
+                                                        "metrics": m}}, sc.name), json_out)
     if plots if plots is not None else sc.outputs.plots:
-        _plots(log)
+        _plots(log, echo)
     if video if video is not None else sc.outputs.video:
-        _video(log, log.with_suffix(".mp4"), sc)
+        _video(log, log.with_suffix(".mp4"), sc, echo=echo)
     if res.status != "ok":
         click.echo(f"error: {res.reason}", err=True)
         sys.exit(EXIT_DIVERGED)
 
 
 @main.command()
-@click.argument("scenario", type=click.Path(exists=True, dir_okay=False))
+@click.argument("scenario", type=SCENARIO)
 @click.option("--controllers", default="rac,rac_dob", show_default=True, help="Comma-separated controller names.")
 @click.option("--set", "sets", multiple=True, metavar="KEY.PATH=VALUE", help="Override a scenario field.")
-@click.option("--out", "out_dir", type=click.Path(file_okay=False), default="logs", show_default=True,
-              help="Folder for the logs and the comparison figure.")
+@click.option("--out-dir", "out_dir", type=click.Path(file_okay=False), default=None,
+              help="Folder for the logs and the comparison figure (default: logs).")
+@click.option("--out", "out_dir_old", type=click.Path(file_okay=False), default=None, hidden=True)
 @click.option("--video/--no-video", default=False, show_default=True, help="Render a video of each run.")
-def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str, video: bool) -> None:
+@click.option("--json", "json_out", metavar="PATH|-", default=None, help=_JSON_HELP)
+def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str | None, out_dir_old: str | None,
+            video: bool, json_out: str | None) -> None:
     """Run SCENARIO with each controller; print a side-by-side table with ratios, write the logs
     and one comparison figure (PNG)."""
+    out_dir = out_dir or out_dir_old or "logs"
+    echo = _json_dest(json_out == "-")
     from .controllers import available
     from .plots import plot_comparison
 
@@ -304,23 +401,26 @@ def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str
     if unknown or not names:
         raise click.BadParameter(f"unknown controller(s) {', '.join(unknown) or '(none given)'}; "
                                  f"registered: {', '.join(available())}", param_hint="--controllers")
-    results, logs, failed = {}, {}, []
+    results, logs, failed, status, runs = {}, {}, [], {}, {}
     _check_dir(out_dir)
     base = _load(scenario, sets)
     for name in names:
         sc = _load(scenario, tuple(sets) + (f"controller.name={name}",))
         path = Path(out_dir) / f"{sc.name}-{name}.mcap"
         res, path, m = _run_one(sc, path, source=scenario)
-        results[name], logs[name] = m, path
-        click.echo(f"log: {path}")
+        results[name], logs[name], status[name] = m, path, res.status
+        runs[name] = {"status": res.status, "reason": res.reason, "log": str(path), "metrics": m}
+        echo(f"log: {path}")
         if res.status != "ok":
             failed.append(f"{name}: {res.reason}")
         if video:
-            _video(path, path.with_suffix(".mp4"), sc)
-    click.echo(metrics_table(results))
+            _video(path, path.with_suffix(".mp4"), sc, echo=echo)
+    echo(metrics_table(results, status))
+    if json_out:
+        _write_json(_json_metrics(runs, base.name), json_out)
     try:
         fig = plot_comparison({n: _read(p) for n, p in logs.items()}, Path(out_dir) / f"{base.name}-compare.png")
-        click.echo(f"figure: {fig}")
+        echo(f"figure: {fig}")
     except OSError as exc:
         _io_error(Path(out_dir) / f"{base.name}-compare.png", exc)
     except (ValueError, KeyError, IndexError, TypeError) as exc:
@@ -331,26 +431,59 @@ def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str
 
 
 @main.command()
-@click.argument("log", type=click.Path(exists=True, dir_okay=False))
-@click.option("-o", "--output", type=click.Path(dir_okay=False), default=None, help="MP4 path (default: LOG.mp4).")
+@click.argument("logs", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False), metavar="LOG [LOG_B]")
+@click.option("-o", "--out", type=click.Path(dir_okay=False), default=None,
+              help="MP4 path (default: LOG.mp4; with --compare LOG-vs-LOG_B.mp4 next to LOG).")
+@click.option("--output", "out_old", type=click.Path(dir_okay=False), default=None, hidden=True)
+@click.option("--compare", is_flag=True,
+              help="Two logs side by side (same view), with an inset of both end-tip errors against time.")
 @click.option("--fps", type=click.IntRange(1, 120), default=30, show_default=True)
-@click.option("--size", type=(int, int), default=(640, 480), show_default=True, help="Width and height [px].")
-def render(log: str, output: str | None, fps: int, size: tuple[int, int]) -> None:
-    """Replay LOG's states in MuJoCo and render an MP4 off-screen (no re-simulation)."""
-    out = Path(output) if output else Path(log).with_suffix(".mp4")
-    _check_out(out, protect=(log,), kind="video", magic=None)
-    run_log = _read(log)
-    info = _render(run_log, out, log, fps=fps, size=size)
-    click.echo(f"video: {out} ({info['frames']} frames)")
+@click.option("--size", type=(int, int), default=None,
+              help="Width and height [px] (default 640 480; with --compare 1280 480, plus the inset).")
+@click.option("--labels/--no-labels", default=True, show_default=True,
+              help="Controller name, legend and scale bar on the frames.")
+def render(logs: tuple[str, ...], out: str | None, out_old: str | None, compare: bool, fps: int,
+           size: tuple[int, int] | None, labels: bool) -> None:
+    """Replay LOG's states in MuJoCo and render an MP4 off-screen (no re-simulation).
+
+    With --compare, LOG and LOG_B side by side (e.g. rac and rac_dob)."""
+    from .render import RenderError, render_compare_video, render_video
+
+    out = out or out_old
+    if compare != (len(logs) == 2) or len(logs) > 2:
+        raise click.UsageError("give one LOG, or two with --compare")
+    first = Path(logs[0])
+    if compare:
+        path = Path(out) if out else first.with_name(f"{first.stem}-vs-{Path(logs[1]).stem}.mp4")
+    else:
+        path = Path(out) if out else first.with_suffix(".mp4")
+    _check_out(path, protect=logs, kind="video", magic=None)
+    runs = [_read(p) for p in logs]
+    try:
+        with _progress(f"render {path.name}", "frame") as tick:
+            if compare:
+                info = render_compare_video(runs[0], runs[1], path, fps=fps, size=size or (1280, 480), on_frame=tick)
+            else:
+                info = render_video(runs[0], path, fps=fps, size=size or (640, 480), on_frame=tick, labels=labels)
+    except RenderError as exc:
+        click.echo(f"error: {exc}", err=True)
+        sys.exit(EXIT_RENDER)
+    except OSError as exc:
+        _io_error(path, exc)
+    except (ValueError, KeyError, IndexError, TypeError) as exc:
+        raise click.UsageError(f"{', '.join(logs)}: cannot be rendered: {type(exc).__name__}: {str(exc)[:200]}") from None
+    click.echo(f"video: {path} ({info['frames']} frames)")
 
 
-@main.command()
+@main.command(short_help="Paper-style time histories (Figs. 5 and 6) and control signals of LOG (PNG).")
 @click.argument("log", type=click.Path(exists=True, dir_okay=False))
-@click.option("-o", "--out-dir", type=click.Path(file_okay=False), default=None, help="Folder (default: LOG's).")
-def plot(log: str, out_dir: str | None) -> None:
+@click.option("--out-dir", type=click.Path(file_okay=False), default=None, help="Folder (default: LOG's).")
+@click.option("-o", "out_dir_old", type=click.Path(file_okay=False), default=None, hidden=True)
+def plot(log: str, out_dir: str | None, out_dir_old: str | None) -> None:
     """Paper-style time histories (Figs. 5 and 6) and control signals of LOG, as PNG."""
     from .plots import plot_run
 
+    out_dir = out_dir or out_dir_old
     folder = _check_dir(Path(out_dir) if out_dir else Path(log).parent)
     run_log = _read(log)
     try:
@@ -365,11 +498,19 @@ def plot(log: str, out_dir: str | None) -> None:
 
 
 @main.command()
-@click.argument("scenario", type=click.Path(exists=True, dir_okay=False))
+@click.argument("scenario", type=SCENARIO, required=False)
 @click.option("--set", "sets", multiple=True, metavar="KEY.PATH=VALUE", help="Override a scenario field.")
-def validate(scenario: str, sets: tuple[str, ...]) -> None:
+@click.option("--list", "list_only", is_flag=True, help="List the packaged scenarios (runnable by name) and exit.")
+def validate(scenario: str | None, sets: tuple[str, ...], list_only: bool) -> None:
     """Check SCENARIO (schema, values, controller, parameters) without running it."""
     from .scenario import ScenarioError, build
+
+    if list_only:
+        for name in packaged_scenarios():
+            click.echo(f"{name:<28} {scenarios_dir() / (name + '.yaml')}")
+        return
+    if scenario is None:
+        raise click.UsageError("missing argument SCENARIO (or --list)")
 
     sc = _load(scenario, sets)
     try:
@@ -394,6 +535,35 @@ def info(log: str) -> None:
     except (McapError, OSError, ValueError, KeyError) as exc:
         raise click.UsageError(f"{log}: not a readable uvms-mj MCAP log ({exc})") from None
     click.echo(text)
+
+
+@main.command()
+@click.argument("log", type=click.Path(exists=True, dir_okay=False))
+@click.option("--format", "fmt", type=click.Choice(["csv", "parquet", "npz", "mat"]), default="csv",
+              show_default=True, help="parquet needs pyarrow, mat needs scipy: pip install 'uvms-mj[export]'.")
+@click.option("--layout", type=click.Choice(["wide", "channels"]), default="wide", show_default=True,
+              help="wide: one table (t and every signal); channels: one table per log channel "
+                   "(state_true, control).")
+@click.option("-o", "--out", type=click.Path(), default=None,
+              help="Output file (wide csv/parquet, npz, mat; default LOG.<format>) or folder (channels "
+                   "csv/parquet; default LOG-export/).")
+def export(log: str, fmt: str, layout: str, out: str | None) -> None:
+    """Export LOG's per-sample signals as CSV, Parquet, NumPy .npz or MATLAB .mat.
+
+    \b
+    Columns: t [s], then each signal; a vector x gives x[0], x[1]...; a matrix x[i,j]
+    (row-major); booleans 0/1; NaN empty in CSV. npz and mat keep the logged shapes and add
+    meta_json (metadata and status). See uvms_mj.export."""
+    from .export import ExportError, export_log
+
+    run_log = _read(log)
+    try:
+        paths = export_log(run_log, fmt, out, layout=layout, log_path=log)
+    except ExportError as exc:
+        click.echo(f"error: {exc}", err=True)
+        sys.exit(2)
+    for p in paths:
+        click.echo(f"{fmt}: {p}")
 
 
 # ------------------------------------------------------------------ without scenario files
@@ -431,7 +601,7 @@ def paper(controllers: str, duration: float, thruster_lag: float | None, ideal: 
                                      f"{dt:.6g} s only for a lag > {dt / LAG_STABILITY['rk4']:.6g} s",
                                      param_hint="--thruster-lag")
     over = {} if thruster_lag is None else {"thrusters.tau": thruster_lag}
-    results = {}
+    results, states = {}, {}
     status = 0
     for name in names:
         try:
@@ -441,9 +611,30 @@ def paper(controllers: str, duration: float, thruster_lag: float | None, ideal: 
         if res.status != "ok":
             click.echo(f"{name}: {res.reason}", err=True)
             status = EXIT_DIVERGED
-        results[name] = metrics(res)
-    click.echo(metrics_table(results))
+        results[name], states[name] = metrics(res), res.status
+    click.echo(metrics_table(results, states))
     sys.exit(status)
+
+
+def _yaml_value(item: str, text: str):
+    """A --set value parsed as YAML, exactly as ``run --set`` parses it (numbers, [lists]...);
+    the older comma form (``1.3,3.6,0.11``, a YAML string) is still read as a list of numbers."""
+    from .scenario import ScenarioError, apply_sets
+
+    try:
+        value = apply_sets({}, [f"v={text}"])["v"]
+    except ScenarioError:
+        raise click.BadParameter(f"{item!r}: the value is not valid YAML", param_hint="--set") from None
+    if isinstance(value, str) and "," in value:
+        try:
+            value = [float(v) for v in value.split(",")]
+        except ValueError:
+            pass
+    if isinstance(value, str) or (isinstance(value, list) and not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) for v in value)):
+        raise click.BadParameter(f"{item!r}: the value must be a number or a list of numbers, e.g. [1.3, 3.6, 0.11]",
+                                 param_hint="--set")
+    return value
 
 
 @main.command()
@@ -454,7 +645,8 @@ def paper(controllers: str, duration: float, thruster_lag: float | None, ideal: 
 @click.option("--drag", type=click.Choice(["strip", "mujoco", "off"]), default="strip", show_default=True,
               help="Drag model.")
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE",
-              help="Parameter override, e.g. --set base.volume=0.03 --set link1.added_mass=1.3,3.6,0.11")
+              help="Parameter override, the value in YAML as for run --set, e.g. --set base.volume=0.03 "
+                   "--set link1.added_mass=[1.3,3.6,0.11]")
 def drift(seconds: float, current: tuple[float, float], drag: str, overrides: tuple[str, ...]) -> None:
     """Let the robot drift passively from the paper's initial pose and print its state."""
     try:
@@ -463,12 +655,7 @@ def drift(seconds: float, current: tuple[float, float], drag: str, overrides: tu
             key, sep, value = item.partition("=")
             if not sep:
                 raise click.BadParameter(f"{item!r} is not KEY=VALUE", param_hint="--set")
-            try:
-                nums = [float(v) for v in value.split(",")]
-            except ValueError:
-                raise click.BadParameter(f"{item!r}: value must be numbers separated by commas",
-                                         param_hint="--set") from None
-            parsed[key] = nums[0] if len(nums) == 1 else nums
+            parsed[key.strip()] = _yaml_value(item, value)
         plant = Plant(overrides=parsed, current=current, terms=HydroTerms(drag=drag))
     except ParameterError as exc:
         raise click.UsageError(str(exc)) from None
@@ -491,7 +678,7 @@ def drift(seconds: float, current: tuple[float, float], drag: str, overrides: tu
 
 
 @main.command()
-@click.argument("scenario", type=click.Path(exists=True, dir_okay=False))
+@click.argument("scenario", type=SCENARIO)
 @click.option("--vary", "varies", multiple=True, required=True, metavar="KEY.PATH=SPEC",
               help="A field and its values (repeat for more axes), e.g. --vary 'plant.current[0]=uniform(0, 0.1)'.")
 @click.option("--n", "n", type=click.IntRange(min=1), default=None,
@@ -506,13 +693,15 @@ def drift(seconds: float, current: tuple[float, float], drag: str, overrides: tu
               help="Sweep seed: sampled parameters and per-run seeds derive from it.")
 @click.option("--set", "sets", multiple=True, metavar="KEY.PATH=VALUE",
               help="Override a scenario field for every run, e.g. --set duration=10.")
-@click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
+@click.option("--out-dir", "out_dir", type=click.Path(file_okay=False), default=None,
               help="Output folder (default: logs/<name>-sweep).")
+@click.option("--out", "out_dir_old", type=click.Path(file_okay=False), default=None, hidden=True)
 @click.option("--logs/--no-logs", default=False, show_default=True,
               help="Write an MCAP log per run (about 1.8 MB and +50 % time per 40 s run).")
-@click.option("--fresh", is_flag=True, help="Delete the results of a different sweep in --out instead of refusing.")
+@click.option("--fresh", is_flag=True, help="Delete the results of a different sweep in --out-dir instead of refusing.")
 def sweep(scenario: str, varies: tuple[str, ...], n: int | None, workers: int | None, engine: str,
-          controllers: str, seed: int, sets: tuple[str, ...], out_dir: str | None, logs: bool, fresh: bool) -> None:
+          controllers: str, seed: int, sets: tuple[str, ...], out_dir: str | None, out_dir_old: str | None,
+          logs: bool, fresh: bool) -> None:
     """Run SCENARIO over sampled parameters, in parallel; write a results table (CSV, one row per
     run), summary figures and the paired ratio of each controller to the first.
 
@@ -540,10 +729,10 @@ def sweep(scenario: str, varies: tuple[str, ...], n: int | None, workers: int | 
         --vary 'nominal.overrides.{base,link1,link2}.added_mass=scale(uniform(0.7, 1.3))'
 
     \b
-    Outputs in --out: results.csv (run_id, sample, controller, seed, the drawn values, metrics,
+    Outputs in --out-dir: results.csv (run_id, sample, controller, seed, the drawn values, metrics,
     status, reason, t_end, wall_s, log, values, sets, key), summary.json, sweep_metrics.png,
     sweep_ratio.png, runs.jsonl and sweep.json (resume record and definition), logs/ (--logs).
-    Rerunning the same command skips finished runs; a different sweep in the same --out is
+    Rerunning the same command skips finished runs; a different sweep in the same --out-dir is
     refused (or deleted with --fresh). A run that diverges or raises is recorded with its
     status and reason and never stops the sweep. Exit codes: 0 done (failed runs included),
     2 bad input (before any run), 130 interrupted (finished runs kept: rerun to resume).
@@ -556,6 +745,7 @@ def sweep(scenario: str, varies: tuple[str, ...], n: int | None, workers: int | 
         plan = plan_sweep(scenario, list(varies), n=n, seed=seed, controllers=controllers.split(","), sets=sets)
     except SweepError as exc:
         raise click.UsageError(str(exc)) from None
+    out_dir = out_dir or out_dir_old
     out = _check_dir(Path(out_dir) if out_dir else Path("logs") / f"{plan.name}-sweep")
     n_samples = len(plan.samples)
     click.echo(f"sweep: {len(plan.runs)} runs ({n_samples} samples x {len(plan.controllers)} controllers: "

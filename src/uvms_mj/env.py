@@ -100,10 +100,14 @@ from typing import Any
 
 import mujoco
 import numpy as np
-from dm_control import mujoco as dm_mujoco
-from dm_control.mujoco import wrapper
-from dm_control.rl import control
-from dm_env import specs
+
+try:  # dm-control is an extra: `pip install 'uvms-mj[rl]'` (the rest of uvms_mj does not need it)
+    from dm_control import mujoco as dm_mujoco
+    from dm_control.mujoco import wrapper
+    from dm_control.rl import control
+    from dm_env import specs
+except ImportError as exc:  # pragma: no cover - exercised only without the extra
+    raise ImportError(f"uvms_mj.env needs dm-control ({exc}): pip install 'uvms-mj[rl]'") from None
 
 from .controllers.base import Command, Controller, Measurement
 from .loop import SensorModel

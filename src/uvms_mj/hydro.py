@@ -13,7 +13,7 @@ Terms (each switchable through :class:`HydroTerms`):
       Q_A = -J_b^T D_b J_b q_ddot + J_b^T (K(nu_r) - D_b a_b)
 
   with J_b the body Jacobian at p_b, K the Kirchhoff/Munk terms and a_b the bias acceleration
-  (the "J_dot term"; mujoco-facts.md). The first part goes into MuJoCo's mass matrix, the rest
+  (the "J_dot term"; docs/mujoco-notes.md). The first part goes into MuJoCo's mass matrix, the rest
   into ``qfrc_passive``. In the plane (body frame, w = omega):
 
       F_x = (m_Ay - m_Ax) w v_y - m_Ax a_x,   F_y = (m_Ay - m_Ax) w v_x - m_Ay a_y,

@@ -101,7 +101,7 @@ def run_closed_loop(
     Args:
         T: controller period [s]; must be a whole number of plant steps.
         warm_start: start the thrusters' lag state at the first command (the robot is holding
-            station when the run starts) instead of at 0 N; see control-design.md "Start-up".
+            station when the run starts) instead of at 0 N; see docs/paper-reading.md "Start-up".
         on_sample: progress callback (k, n_samples).
         sink: called with (t, row) for every sample as it happens (e.g. an MCAP recorder's
             ``write_sample``), row mapping signal names to floats, ints, bools or 1-D arrays;

@@ -18,7 +18,6 @@ import math
 from dataclasses import dataclass, replace
 from pathlib import Path
 
-import mujoco
 import numpy as np
 
 from . import native as _native

@@ -43,7 +43,7 @@ class BodyParams:
         joint_offset: position (x, y) of this body's frame origin in its parent's frame [m]
             (for the base: its initial world position; unused by the dynamics).
         box_center: centre (x, y) of the body's geom box in the body frame [m]; the point where
-            added mass and added inertia act (control-design.md assumption).
+            added mass and added inertia act (our assumption, docs/paper-reading.md).
         box_half: half extents (x, y) of the box in the plane [m] (strip lengths are 2x these).
         width: D_i, the box's out-of-plane extent [m] (Eqs. 2-3).
         added_mass: (m_Ax, m_Ay) along body x and y [kg] (Table 1).

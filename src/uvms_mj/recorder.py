@@ -35,8 +35,13 @@ topic                  schema                   content and rate
                                                 ``path_resolution`` s; the whole path so far,
                                                 re-sent every ``path_period`` s of run time and
                                                 at close (so seeking in Foxglove always shows it).
-``/joint_states``      uvms_mj.JointStates      names, ``position`` = q_true,
-                                                ``velocity`` = qd_true; one per sample.
+``/joint_states``      foxglove.JointStates     ``joints``: one {``name``, ``position`` (q_true),
+                                                ``velocity`` (qd_true)} per joint; one per
+                                                sample. (Logs written before Foxglove had this
+                                                schema used ``uvms_mj.JointStates``, with
+                                                ``name``/``position``/``velocity`` arrays;
+                                                :func:`read_log` never reads this channel, so
+                                                both read back alike.)
 ``/state/true``        uvms_mj.TrueState        ``t`` and the true plant state ``q_true``,
                                                 ``qd_true``, ``tip_true``; one per sample.
 ``/control``           uvms_mj.ControlSample    ``t`` and every other per-sample signal (the
@@ -56,8 +61,9 @@ the first row; a name that first appears later is dropped with a warning, and no
 are not recorded.
 
 Metadata records: ``uvms_mj`` (written at creation) holds the caller's metadata dict plus
-``versions`` (uvms_mj, mujoco, numpy, mcap, python), ``git_commit`` / ``git_dirty`` (when the
-package runs from a git checkout), ``robot_params``, ``created_utc`` and ``log_format``;
+``versions`` (uvms_mj, mujoco, numpy, mcap, python), ``git_commit`` / ``git_dirty`` (from git
+when the package runs from a checkout, else written into the wheel when it was built, else
+``git_commit`` = "unknown"), ``robot_params``, ``created_utc`` and ``log_format``;
 ``uvms_mj.status`` (written at close) holds ``status`` ("ok", "diverged", "interrupted",
 "error"...), ``reason`` and any run metadata given to :meth:`McapRecorder.close`. Each value
 is stored as JSON text (MCAP metadata is string -> string).
@@ -254,12 +260,17 @@ def _scene_update_schema() -> dict:
 
 
 def _joint_states_schema() -> dict:
-    return _obj("uvms_mj.JointStates", {
-        "timestamp": _time_schema(),
-        "name": _arr({"type": "string"}, "joint names (MuJoCo joint order)"),
-        "position": _arr(_num(), "true joint positions q [m, rad]"),
-        "velocity": _arr(_num(), "true joint velocities qd [m/s, rad/s]"),
-    }, description="Joint states of the robot (Foxglove has no JointStates schema)")
+    joint = _obj("foxglove.JointState", {
+        "name": {"type": "string"}, "position": _num(), "velocity": _num(), "acceleration": _num(),
+        "effort": _num()})
+    joint["required"] = ["name"]
+    return _obj("foxglove.JointStates", {"timestamp": _time_schema(), "joints": _arr(joint)},
+                description="The state of a set of joints at a given time.")
+
+
+#: Logs written before foxglove.JointStates existed used this schema name on /joint_states
+#: ({"timestamp", "name": [...], "position": [...], "velocity": [...]}); they read back the same.
+LEGACY_JOINT_STATES = "uvms_mj.JointStates"
 
 
 _JSON_TYPE = {"b": "integer", "i": "integer", "u": "integer", "f": "number"}
@@ -287,7 +298,7 @@ def _sample_schema(title: str, description: str, layout: list[dict]) -> dict:
 SCHEMAS: dict[str, dict] = {
     "foxglove.FrameTransforms": _frame_transforms_schema(),
     "foxglove.SceneUpdate": _scene_update_schema(),
-    "uvms_mj.JointStates": _joint_states_schema(),
+    "foxglove.JointStates": _joint_states_schema(),
 }
 
 # --------------------------------------------------------------------------- encoding helpers
@@ -400,8 +411,25 @@ def _version(dist: str, module: str | None = None) -> str | None:
 
 
 def _git_info() -> dict:
-    """Commit (and whether the tree is dirty) of the checkout this package runs from; {} when
-    it does not run from a git checkout of its own, or git is missing (never raises)."""
+    """Commit (and whether the tree is dirty) of the checkout this package runs from, else the
+    one written into the wheel at build time (``uvms_mj/_build_info.py``, see ``hatch_build.py``),
+    else ``{"git_commit": "unknown"}`` (never raises)."""
+    info = _git_checkout_info()
+    if info:
+        return info
+    try:
+        from . import _build_info  # type: ignore[attr-defined]
+
+        commit = str(getattr(_build_info, "GIT_COMMIT", "") or "unknown")
+        dirty = getattr(_build_info, "GIT_DIRTY", None)
+        return {"git_commit": commit, **({"git_dirty": dirty} if isinstance(dirty, bool) else {})}
+    except Exception:
+        return {"git_commit": "unknown"}
+
+
+def _git_checkout_info() -> dict:
+    """Commit and dirtiness of the git checkout this package runs from; {} when it does not run
+    from a git checkout of its own (an editable install), or git is missing (never raises)."""
     pkg = Path(__file__).resolve().parent
     try:
         out = subprocess.run(["git", "-C", str(pkg), "rev-parse", "--show-toplevel", "HEAD"],
@@ -794,7 +822,7 @@ class McapRecorder:
         self._has_q = "q_true" in row and np.shape(row["q_true"]) == (5,) and self.params is not None
         if self._has_q:
             self._channel(TOPIC_TF, "foxglove.FrameTransforms", SCHEMAS["foxglove.FrameTransforms"])
-            self._channel(TOPIC_JOINTS, "uvms_mj.JointStates", SCHEMAS["uvms_mj.JointStates"])
+            self._channel(TOPIC_JOINTS, "foxglove.JointStates", SCHEMAS["foxglove.JointStates"])
             s45 = math.sqrt(0.5)
             b = self.params.bodies
             self._tf_chain = [
@@ -805,7 +833,7 @@ class McapRecorder:
                 (b[2].name, "tip", self.params.tip_offset, dict(_IDENTITY)),
             ]
             self._tf_tmpl = _tf_template(self._tf_chain)
-            self._js_tmpl = '{"timestamp":%s,"name":' + json.dumps(list(JOINT_NAMES)) + ',"position":%s,"velocity":%s}'
+            self._js_names = [json.dumps(n) for n in JOINT_NAMES]
         if self.params is not None:
             self._writer.add_message(self._channel(TOPIC_SCENE, "foxglove.SceneUpdate",
                                                    SCHEMAS["foxglove.SceneUpdate"]),
@@ -871,8 +899,13 @@ class McapRecorder:
                 for i in range(3):
                     vals[f"z{i}"], vals[f"w{i}"] = nums[2 + 2 * i], nums[3 + 2 * i]
                 w.add_message(self._channels[TOPIC_TF], ns, (self._tf_tmpl % vals).encode(), ns, k)
-                qd = np.asarray(row["qd_true"], dtype=float).tolist() if "qd_true" in row else []
-                js = self._js_tmpl % (stamp, _enc(q), _enc(qd))
+                qd = np.asarray(row["qd_true"], dtype=float).tolist() if "qd_true" in row else None
+                pos = _enc(q)[1:-1].split(",")
+                vel = _enc(qd)[1:-1].split(",") if qd is not None and len(qd) == len(q) else None
+                joints = ",".join('{"name":%s,"position":%s%s}' % (name, pos[i], "" if vel is None else
+                                                                  ',"velocity":' + vel[i])
+                                  for i, name in enumerate(self._js_names))
+                js = '{"timestamp":%s,"joints":[%s]}' % (stamp, joints)
                 w.add_message(self._channels[TOPIC_JOINTS], ns, js.encode(), ns, k)
             if self._want_paths:
                 self._add_path_points(t, row)
@@ -1247,20 +1280,39 @@ def format_info(info: Mapping[str, Any]) -> str:
     if "git_commit" in meta:
         dirty = " (dirty)" if meta.pop("git_dirty", False) else ""
         lines.append(f"git:       {meta.pop('git_commit')}{dirty}")
+    def add_mapping(items: Mapping[str, Any]) -> None:
+        for k, v in items.items():
+            if isinstance(v, Mapping) and v:  # e.g. the resolved scenario: indented YAML
+                import yaml
+
+                text = yaml.safe_dump(json.loads(json.dumps(v, default=str)), sort_keys=False,
+                                      default_flow_style=None, width=100)
+                lines.append(f"  {k}:")
+                lines.extend("    " + line for line in text.rstrip("\n").splitlines())
+            else:
+                lines.append(f"  {k}: {json.dumps(v, sort_keys=True, default=str)}")
+
     if meta:
         lines.append("metadata:")
-        for k, v in meta.items():
-            text = json.dumps(v, sort_keys=True, default=str)
-            lines.append(f"  {k}: {text if len(text) <= 100 else text[:97] + '...'}")
+        add_mapping(meta)
     extra = {k: v for k, v in info.get("status_record", {}).items() if k not in ("status", "reason")}
     if extra:
-        lines.append("run:       " + ", ".join(f"{k}={v}" for k, v in extra.items()))
+        flat = {k: v for k, v in extra.items() if not isinstance(v, Mapping)}
+        if flat:
+            lines.append("run:       " + ", ".join(f"{k}={v}" for k, v in flat.items()))
+        nested = {k: v for k, v in extra.items() if isinstance(v, Mapping)}
+        if nested:
+            lines.append("run metadata:")
+            add_mapping(nested)
     lines.append("channels:")
     width = max((len(c["topic"]) for c in info["channels"]), default=5)
     for c in info["channels"]:
         lines.append(f"  {c['topic']:<{width}}  {c['messages']:>7} msgs  {c['schema']} "
                      f"({c['message_encoding']}/{c['schema_encoding']})")
     if info.get("signals"):
-        lines.append("signals:   " + ", ".join(
-            f"{n}{tuple(s['shape']) if s['shape'] else ''}" for n, s in info["signals"].items()))
+        import textwrap
+
+        lines.extend(textwrap.wrap(", ".join(f"{n}{tuple(s['shape']) if s['shape'] else ''}"
+                                             for n, s in info["signals"].items()),
+                                   width=100, initial_indent="signals:   ", subsequent_indent=" " * 11))
     return "\n".join(lines)

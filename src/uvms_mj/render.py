@@ -13,8 +13,11 @@ MuJoCo picks its OpenGL backend from ``$MUJOCO_GL`` once, when ``mujoco`` is fir
 ``import mujoco`` itself fails when that backend's library is missing. ``uvms_mj/__init__.py``
 therefore calls :func:`configure_gl` before anything imports mujoco:
 
-* ``MUJOCO_GL`` unset (Linux): ``egl`` if ``libEGL.so.1`` and ``libOpenGL.so.0`` (or ``libGL``)
-  load, else ``osmesa`` if ``libOSMesa`` loads, else left unset (MuJoCo's GLFW default);
+* ``MUJOCO_GL`` unset (Linux) and no display (neither ``DISPLAY`` nor ``WAYLAND_DISPLAY``):
+  ``egl`` if ``libEGL.so.1`` and ``libOpenGL.so.0`` (or ``libGL``) load, else ``osmesa`` if
+  ``libOSMesa`` loads, else left unset (MuJoCo's GLFW default);
+* ``MUJOCO_GL`` unset with a display: left unset, so the process (and its children, viewers
+  included) keeps MuJoCo's GLFW default; the user's choice, when set, is never replaced;
 * ``MUJOCO_GL`` set to a value MuJoCo rejects, or to ``egl``/``osmesa`` whose library cannot be
   loaded: mujoco is imported with rendering disabled (so simulation keeps working), the user's
   value is put back, and the problem is remembered.
@@ -41,7 +44,8 @@ from typing import Any, Callable, Iterator
 
 import numpy as np
 
-__all__ = ["RenderError", "DEBIAN_PACKAGES", "configure_gl", "gl_status", "render_frames", "render_video"]
+__all__ = ["RenderError", "DEBIAN_PACKAGES", "configure_gl", "gl_status", "render_compare_video", "render_frames",
+           "render_video"]
 
 #: Debian/Ubuntu packages that provide each headless backend.
 DEBIAN_PACKAGES: dict[str, tuple[str, ...]] = {
@@ -102,6 +106,8 @@ def configure_gl() -> None:
     raw = os.environ.get("MUJOCO_GL")
     value = (raw or "").strip().lower()
     if not value:
+        if not _headless():
+            return  # a display: MuJoCo's GLFW default works, and the process keeps its own choice
         for backend in ("egl", "osmesa"):
             if not _missing_libs(backend):
                 os.environ["MUJOCO_GL"] = backend
@@ -288,6 +294,154 @@ def _stamp_text(img: np.ndarray, text: str, x: int = 8, y: int = 8, scale: int =
     region[mask[: region.shape[0], : region.shape[1]]] = 255
 
 
+# ------------------------------------------------------------------ static overlays (matplotlib Agg, once per video)
+
+
+def _nice_length(max_len: float) -> float:
+    """The largest 1, 2 or 5 x 10^k not above max_len (> 0)."""
+    k = math.floor(math.log10(max_len))
+    for m in (5, 2, 1):
+        if m * 10 ** k <= max_len:
+            return m * 10 ** k
+    return 10 ** k
+
+
+def _fmt_length(m: float) -> str:
+    if m >= 1:
+        return f"{m:g} m"
+    if m >= 0.01:
+        return f"{m * 100:g} cm"
+    return f"{m * 1000:g} mm"
+
+
+def _rgba_canvas(width: int, height: int):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width / 100, height / 100), dpi=100)
+    fig.patch.set_alpha(0.0)
+    canvas = FigureCanvasAgg(fig)
+    return fig, canvas
+
+
+def _canvas_rgba(canvas) -> np.ndarray:
+    canvas.draw()
+    return np.asarray(canvas.buffer_rgba()).copy()
+
+
+class _Overlay:
+    """A premultiplied RGBA layer composited onto each frame, only where it is not transparent
+    (tight boxes in a 4 x 4 grid of tiles, so a label in each corner costs four small blends)."""
+
+    def __init__(self, rgba: np.ndarray) -> None:
+        h, w = rgba.shape[:2]
+        self.parts = []
+        for ty in range(4):
+            for tx in range(4):
+                ya, yb, xa, xb = ty * h // 4, (ty + 1) * h // 4, tx * w // 4, (tx + 1) * w // 4
+                alpha = rgba[ya:yb, xa:xb, 3]
+                ys, xs = np.nonzero(alpha)
+                if not len(ys):
+                    continue
+                y0, y1, x0, x1 = ya + ys.min(), ya + ys.max() + 1, xa + xs.min(), xa + xs.max() + 1
+                a = rgba[y0:y1, x0:x1, 3:4].astype(np.float32) / 255.0
+                self.parts.append(((y0, y1, x0, x1), 1.0 - a, rgba[y0:y1, x0:x1, :3].astype(np.float32) * a))
+
+    def apply(self, frame: np.ndarray) -> None:
+        for (y0, y1, x0, x1), keep, rgb in self.parts:
+            region = frame[y0:y1, x0:x1]
+            region[...] = (region * keep + rgb).astype(frame.dtype)
+
+
+def _labels_overlay(width: int, height: int, title: str | None, px_per_m: float | None,
+                    legend: bool) -> _Overlay:
+    """Controller name (top right), legend of the paths (bottom left) and a scale bar (bottom right)."""
+    fig, canvas = _rgba_canvas(width, height)
+    fs = max(7.0, height / 40)
+    box = {"boxstyle": "round,pad=0.3", "facecolor": (0, 0, 0, 0.55), "edgecolor": "none"}
+    if title:
+        fig.text(1 - 10 / width, 1 - 8 / height, title, ha="right", va="top", color="white", fontsize=fs * 1.3,
+                 fontweight="bold", bbox=box)
+    if legend:
+        y = 10 / height
+        fig.text(10 / width, y + 1.9 * fs / height * 1.4, "\u2014 desired tip path", color=tuple(_RGBA_DESIRED[:3]),
+                 fontsize=fs, va="bottom", ha="left", bbox=box)
+        fig.text(10 / width, y, "\u2014 tip trace", color=tuple(_RGBA_TRACE[:3]), fontsize=fs, va="bottom",
+                 ha="left", bbox=box)
+    if px_per_m and math.isfinite(px_per_m) and px_per_m > 0:
+        length = _nice_length(0.25 * width / px_per_m)
+        bar = length * px_per_m
+        x1, y0 = width - 14, 14
+        fig.patches.append(__import__("matplotlib.patches", fromlist=["Rectangle"]).Rectangle(
+            ((x1 - bar - 6) / width, (y0 - 6) / height), (bar + 12) / width, (fs * 2.2 + 12) / height,
+            transform=fig.transFigure, facecolor=(0, 0, 0, 0.55), edgecolor="none"))
+        fig.add_artist(__import__("matplotlib.lines", fromlist=["Line2D"]).Line2D(
+            [(x1 - bar) / width, x1 / width], [y0 / height, y0 / height], transform=fig.transFigure,
+            color="white", linewidth=3, solid_capstyle="butt"))
+        fig.text((x1 - bar / 2) / width, (y0 + 5) / height, _fmt_length(length), color="white", fontsize=fs,
+                 ha="center", va="bottom")
+    return _Overlay(_canvas_rgba(canvas))
+
+
+def _controller_name(log) -> str | None:
+    meta = getattr(log, "meta", None) or {}
+    name = meta.get("controller")
+    if not name and isinstance(meta.get("scenario"), dict):
+        name = (meta["scenario"].get("controller") or {}).get("name")
+    return str(name) if name else None
+
+
+def _tip_error_mm(log) -> tuple[np.ndarray, np.ndarray] | None:
+    """(t, |p_tip,desired - p_tip| [mm]) of a log, or None."""
+    t = np.asarray(log.t, dtype=float).ravel()
+    pd, tip = _signal(log, "p_desired"), _signal(log, "tip_true")
+    if pd is not None and tip is not None and pd.ndim == 2 and pd.shape[1] >= 5 and len(pd) == len(t) == len(tip):
+        return t, 1e3 * np.hypot(pd[:, 3] - tip[:, 0], pd[:, 4] - tip[:, 1])
+    ep = _signal(log, "e_p")
+    if ep is not None and ep.ndim == 2 and ep.shape[1] >= 5 and len(ep) == len(t):
+        return t, 1e3 * np.hypot(ep[:, 3], ep[:, 4])
+    return None
+
+
+class _ErrorInset:
+    """A strip under the panels: the tip error of each run against time, and a moving cursor."""
+
+    COLORS = ("#4da6ff", "#ffb347")
+
+    def __init__(self, width: int, height: int, series: list[tuple[str, tuple[np.ndarray, np.ndarray]]]) -> None:
+        fig, canvas = _rgba_canvas(width, height)
+        fig.patch.set_facecolor((0.08, 0.08, 0.1, 1.0))
+        fig.patch.set_alpha(1.0)
+        fs = max(6.0, height / 12)
+        ax = fig.add_axes((0.07, 0.22, 0.9, 0.68))
+        ax.set_facecolor((0.12, 0.12, 0.15))
+        t_max = 0.0
+        for (name, (t, e)), color in zip(series, self.COLORS):
+            ok = np.isfinite(e)
+            ax.plot(t[ok], e[ok], color=color, linewidth=1.2, label=name)
+            t_max = max(t_max, float(t[ok].max()) if ok.any() else 0.0)
+        ax.set_xlim(0.0, t_max or 1.0)
+        ax.set_ylim(bottom=0.0)
+        ax.set_title("end-tip error [mm]", color="white", fontsize=fs, loc="left", pad=2)
+        ax.tick_params(colors="white", labelsize=fs * 0.85, length=2)
+        for sp in ax.spines.values():
+            sp.set_color((0.6, 0.6, 0.6))
+        ax.set_xlabel("t [s]", color="white", fontsize=fs * 0.85, labelpad=0)
+        leg = ax.legend(fontsize=fs * 0.85, loc="upper right", frameon=False, labelcolor="white", ncol=2)
+        self.image = _canvas_rgba(canvas)[..., :3]
+        # pixel columns of t = 0 and t = t_max, rows of the axes (image rows from the top)
+        (x0, y0), (x1, y1) = ax.transData.transform([(0.0, 0.0), (t_max or 1.0, ax.get_ylim()[1])])
+        self.x0, self.x1, self.t_max = x0, x1, t_max or 1.0
+        self.r0, self.r1 = int(height - y1), int(height - y0)
+        del leg
+
+    def frame(self, t: float) -> np.ndarray:
+        img = self.image.copy()
+        x = int(round(self.x0 + (self.x1 - self.x0) * min(max(t, 0.0), self.t_max) / self.t_max))
+        img[self.r0:self.r1, max(0, x - 1):x + 1] = 255
+        return img
+
+
 # ------------------------------------------------------------------ scene
 
 
@@ -402,7 +556,9 @@ class _Replay:
     """Scene, camera, overlays and GL context for replaying a log; iterate for the frames."""
 
     def __init__(self, log, fps: float, size: tuple[int, int], camera: str | int | None, speed: float,
-                 max_seconds: float | None, model_path: str | Path | None, clock: bool) -> None:
+                 max_seconds: float | None, model_path: str | Path | None, clock: bool,
+                 labels: bool = True, extent: tuple[np.ndarray, np.ndarray] | None = None,
+                 title: str | None = None) -> None:
         import mujoco
 
         width, height = int(size[0]), int(size[1])
@@ -460,10 +616,17 @@ class _Replay:
         for path in (desired, tip):
             if path is not None:
                 lo, hi = np.minimum(lo, path[shown].min(axis=0)), np.maximum(hi, path[shown].max(axis=0))
+        if extent is not None:  # a view shared with another replay (render_compare_video)
+            lo, hi = np.minimum(lo, extent[0]), np.maximum(hi, extent[1])
+        self.extent = (lo, hi)
         self.z_front = z_robot + 0.01
+        px_per_m = None
         if camera is None:
             self.cam = model.camera("uvms_render").id
             _place_camera(model, self.cam, lo, hi, z_robot, width / height)
+            # the plane of motion (z = 0) seen from the camera on +Z
+            px_per_m = height / (2.0 * float(model.cam_pos[self.cam][2])
+                                 * math.tan(math.radians(model.cam_fovy[self.cam]) / 2))
         elif isinstance(camera, str):
             if mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_CAMERA, camera) < 0:
                 names = [model.camera(i).name for i in range(model.ncam) if model.camera(i).name != "uvms_render"]
@@ -481,6 +644,10 @@ class _Replay:
             keep = _thin(_simplify(desired, _TRACE_TOL), 300)
             self.desired_pts = np.c_[desired[keep], np.zeros(len(keep))]
         self.tip_keep = _thin(_simplify(tip, _TRACE_TOL), 300) if tip is not None else None
+        self.overlay = None
+        if labels:
+            self.overlay = _labels_overlay(width, height, title if title is not None else _controller_name(log),
+                                           px_per_m, legend=desired is not None or tip is not None)
         self.renderer = _make_renderer(model, height, width)
 
     def __len__(self) -> int:
@@ -510,6 +677,8 @@ class _Replay:
                     pts = np.c_[pts, np.zeros(len(pts))]
                     _add_polyline(scene, _to_front(pts, eye, self.z_front), _RGBA_TRACE, 5.0)
             frame = renderer.render()
+            if self.overlay is not None:
+                self.overlay.apply(frame)
             if self.clock:
                 text = f"t = {tf:5.2f} s" if self.speed == 1 else f"t = {tf:5.2f} s  x{self.speed:g}"
                 _stamp_text(frame, text, scale=max(1, self.height // 240))
@@ -528,13 +697,14 @@ def render_frames(
     max_seconds: float | None = None,
     model_path: str | Path | None = None,
     clock: bool = True,
+    labels: bool = True,
 ) -> Iterator[tuple[float, np.ndarray]]:
     """Yield (log time [s], RGB frame (height, width, 3) uint8) for each video frame.
 
     The frame buffer is reused: copy a frame to keep it past the next iteration.
     See :func:`render_video` for the arguments.
     """
-    replay = _Replay(log, fps, size, camera, speed, max_seconds, model_path, clock)
+    replay = _Replay(log, fps, size, camera, speed, max_seconds, model_path, clock, labels=labels)
     try:
         yield from replay
     finally:
@@ -565,6 +735,7 @@ def render_video(
     max_seconds: float | None = None,
     on_frame: Callable[[int, int], None] | None = None,
     model_path: str | Path | None = None,
+    labels: bool = True,
 ) -> dict[str, Any]:
     """Replay a run's true motion into the MuJoCo scene and write an MP4 video.
 
@@ -580,6 +751,10 @@ def render_video(
         max_seconds: cap on the video length [s].
         on_frame: progress callback (frame index, number of frames).
         model_path: scene model (default: the package's models/scene.xml).
+        labels: draw the controller's name (top right, from the log's metadata), a legend of the
+            desired path and the tip trace (bottom left) and, for the fitted side view, a scale
+            bar in the plane of motion (bottom right). Drawn once with matplotlib (Agg) and
+            composited onto each frame.
 
     Returns:
         {"path", "frames", "seconds" (video length), "fps", "size", "render_fps" (frames per
@@ -595,7 +770,7 @@ def render_video(
     if width % 2 or height % 2:
         raise ValueError(f"size = {size!r}: H.264 with yuv420p needs even width and height")
     t_start = time.perf_counter()
-    replay = _Replay(log, fps, (width, height), camera, speed, max_seconds, model_path, clock=True)
+    replay = _Replay(log, fps, (width, height), camera, speed, max_seconds, model_path, clock=True, labels=labels)
     setup_s = time.perf_counter() - t_start
     render_s, n, writer = 0.0, 0, None
     try:
@@ -626,4 +801,87 @@ def render_video(
         "render_fps": n / render_s if render_s > 0 else float("inf"),
         "setup_s": setup_s,
         "wall_s": wall,
+    }
+
+
+def render_compare_video(
+    log_a,
+    log_b,
+    out_path: str | Path,
+    fps: float = 30,
+    size: tuple[int, int] = (1280, 480),
+    speed: float = 1.0,
+    max_seconds: float | None = None,
+    on_frame: Callable[[int, int], None] | None = None,
+    model_path: str | Path | None = None,
+    names: tuple[str, str] | None = None,
+    inset: bool = True,
+) -> dict[str, Any]:
+    """Side-by-side MP4 of two runs (e.g. ``rac`` and ``rac_dob``), with an error inset.
+
+    Each half (``size[0] / 2`` x ``size[1]``) is :func:`render_video`'s fitted side view, both
+    with the same view (fitted to both runs, so the scale bars agree), each labelled with its
+    controller (or ``names``). Below them (``inset=True``) a strip of height ``size[1] / 4``
+    plots the end-tip error |p_ed - p_tip| [mm] of both runs against time with a moving cursor:
+    sub-millimetre differences that no side view can show. A run that ends earlier (a
+    divergence) holds its last frame. Returns the same dictionary as :func:`render_video`.
+    """
+    out_path = Path(out_path)
+    width, height = int(size[0]), int(size[1])
+    half = (width // 2) // 2 * 2
+    strip = (height // 4) // 2 * 2 if inset else 0
+    if half < 16 or height < 16:
+        raise ValueError(f"size = {size!r}: too small for two panels")
+    if height % 2:
+        raise ValueError(f"size = {size!r}: H.264 with yuv420p needs an even height")
+    names = tuple(names) if names else (_controller_name(log_a) or "A", _controller_name(log_b) or "B")
+    t_start = time.perf_counter()
+    kw = dict(fps=fps, size=(half, height), camera=None, speed=speed, max_seconds=max_seconds,
+              model_path=model_path, clock=True)
+    a = _Replay(log_a, title=names[0], **kw)
+    b = _Replay(log_b, title=names[1], extent=a.extent, **kw)
+    if not all(np.array_equal(x, y) for x, y in zip(a.extent, b.extent)):
+        a.close()
+        a = _Replay(log_a, title=names[0], extent=b.extent, **kw)
+    err = None
+    if strip:
+        series = [(n, e) for n, e in zip(names, (_tip_error_mm(log_a), _tip_error_mm(log_b))) if e is not None]
+        err = _ErrorInset(2 * half, strip, series) if series else None
+    setup_s = time.perf_counter() - t_start
+    total = max(len(a), len(b))
+    frame = np.zeros((height + (strip if err is not None else 0), 2 * half, 3), dtype=np.uint8)
+    render_s, n, writer = 0.0, 0, None
+    try:
+        out_path.parent.mkdir(parents=True, exist_ok=True)
+        writer = _open_writer(out_path, frame.shape[1], frame.shape[0], fps)
+        ia, ib = iter(a), iter(b)
+        for i in range(total):
+            t0 = time.perf_counter()
+            tf = None
+            for it, x0 in ((ia, 0), (ib, half)):
+                item = next(it, None)
+                if item is not None:
+                    frame[:height, x0:x0 + half] = item[1]
+                    tf = item[0] if tf is None else max(tf, item[0])
+            if err is not None and tf is not None:
+                frame[height:] = err.frame(tf)
+            render_s += time.perf_counter() - t0
+            writer.send(np.ascontiguousarray(frame))
+            n += 1
+            if on_frame is not None:
+                on_frame(i, total)
+    finally:
+        a.close()
+        b.close()
+        if writer is not None:
+            writer.close()
+    return {
+        "path": str(out_path),
+        "frames": n,
+        "seconds": n / fps,
+        "fps": fps,
+        "size": (frame.shape[1], frame.shape[0]),
+        "render_fps": n / render_s if render_s > 0 else float("inf"),
+        "setup_s": setup_s,
+        "wall_s": time.perf_counter() - t_start,
     }

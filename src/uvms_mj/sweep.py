@@ -73,7 +73,7 @@ random parameters (in the order of the ``--vary`` options), the second gives the
 ``--controllers``, every sample is run with each of them (same parameters, same seed): the
 pairs give the paired ratio (e.g. rac_dob / rac) of each metric.
 
-Outputs (in ``--out DIR``)
+Outputs (in ``--out-dir DIR``)
 --------------------------
 * ``sweep.json``: the sweep definition (base scenario, specs, n, seed, controllers);
 * ``runs.jsonl``: one line per finished run, appended as runs finish (the resume record);
@@ -552,7 +552,7 @@ _FORBIDDEN = {
     "description": "the sweep keeps the scenario's description",
     "seed": "per-run seeds are derived from --seed and the sample index",
     "controller.name": "choose the controllers with --controllers",
-    "outputs": "the sweep writes its own outputs (--logs, --out)",
+    "outputs": "the sweep writes its own outputs (--logs, --out-dir)",
 }
 
 
@@ -1332,7 +1332,7 @@ def prepare_out(plan: SweepPlan, out_dir: str | Path, fresh: bool = False) -> di
     """Check or create DIR's sweep definition; return the finished runs by key."""
     out = Path(out_dir)
     if out.exists() and not out.is_dir():
-        raise SweepError(f"--out {out}: exists and is not a folder")
+        raise SweepError(f"--out-dir {out}: exists and is not a folder")
     spec = out / "sweep.json"
     if fresh and out.exists():
         for name in _OUR_FILES:
@@ -1343,15 +1343,15 @@ def prepare_out(plan: SweepPlan, out_dir: str | Path, fresh: bool = False) -> di
         try:
             old = json.loads(spec.read_text(encoding="utf-8"))
         except ValueError:
-            raise SweepError(f"--out {out}: {spec} is not readable JSON; use another --out or --fresh") from None
+            raise SweepError(f"--out-dir {out}: {spec} is not readable JSON; use another --out-dir or --fresh") from None
         old_def = old.get("definition", {})
         new_def = json.loads(json.dumps(plan.definition))
         if old_def != new_def:
-            raise SweepError(f"--out {out} holds a different sweep; differs: " + "; ".join(_diff(old_def, new_def))
-                             + ". Rerun with the same arguments to resume, choose another --out, or add --fresh to "
+            raise SweepError(f"--out-dir {out} holds a different sweep; differs: " + "; ".join(_diff(old_def, new_def))
+                             + ". Rerun with the same arguments to resume, choose another --out-dir, or add --fresh to "
                              "delete the old results.")
     elif out.exists() and (out / "runs.jsonl").exists():
-        raise SweepError(f"--out {out}: runs.jsonl without sweep.json; use another --out or --fresh")
+        raise SweepError(f"--out-dir {out}: runs.jsonl without sweep.json; use another --out-dir or --fresh")
     out.mkdir(parents=True, exist_ok=True)
     if not spec.exists():
         from . import __version__

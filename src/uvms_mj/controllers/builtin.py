@@ -1,8 +1,8 @@
 """Built-in controllers: digital RAC (``rac``), RAC + disturbance observer (``rac_dob``) and a
 task-space PD baseline (``pd``).
 
-Equation numbers refer to the paper (shared/seed); the reading of each equation is the one fixed
-in shared/docs/control-design.md.
+Equation numbers refer to the paper; the reading of each equation (typos, missing values,
+assumptions) is the one in docs/paper-reading.md.
 """
 
 from __future__ import annotations
@@ -32,7 +32,7 @@ class LowPassZOH:
     """F(s) = 1 / (Tf s + 1) discretized with a zero-order hold and the one-sample delay of
     Fig. 3(b): z(k) = h z(k-1) + (1 - h) w(k-1), h = exp(-T / Tf).
 
-    (The paper prints h = e^{-Tf/T}: a typo, see control-design.md.)
+    (The paper prints h = e^{-Tf/T}: a typo, see docs/paper-reading.md.)
     """
 
     def __init__(self, T: float, tf: float, size: int = 3) -> None:
@@ -55,7 +55,7 @@ class LowPassZOH:
 
 @dataclass
 class SingularHandler:
-    """Eq. 12 as read in control-design.md: the base carries the arm near det B = 0.
+    """Eq. 12 as read in docs/paper-reading.md: the base carries the arm near det B = 0.
 
     Phases: 0 normal (base desired velocity 0); 1 carry: from k1, the first sample with
     |det B| < js_low, the base desired velocity ramps linearly over n samples to the tip's cruise
@@ -259,7 +259,7 @@ class RAC(Controller):
         dyn = self.nominal.dynamics(q, qd)
         M_BB, M_BM, M_MB, M_MM, h_B, h_M = dyn.blocks()
         u_M = M_MB @ qdd_d[:3] + M_MM @ qdd_d[3:] + h_M
-        f_t = M_BM @ qdd_d[3:] + h_B  # Eq. 13 (with gravity/buoyancy, control-design.md)
+        f_t = M_BM @ qdd_d[3:] + h_B  # Eq. 13 (with gravity/buoyancy, docs/paper-reading.md)
         f_e_hat = self.filter.output() - self.g * M_BB @ qd[:3] if self.observer else np.zeros(3)
         u_B = M_BB @ qdd_d[:3] + f_t + f_e_hat  # Eq. 15
         alloc = self.allocator(u_B, q[2])

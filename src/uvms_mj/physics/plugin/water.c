@@ -152,10 +152,12 @@ typedef struct {
   int Mvalid;
   int nactive;               /* bodies with uvms.hydro and their ancestors (dofs only), increasing */
   int* active;
-  int nfdof, nmdof;          /* dofs moving a uvms.hydro body / one with added mass, increasing */
-  int *fdof, *mdof;
+  int nfdof;                 /* dofs moving a uvms.hydro body, increasing */
+  int* fdof;
   unsigned char* dof_quat;   /* per dof: rotation of a ball or free joint (cdof_dot from cvel) */
-  double *Fb, *Bb, *Sb;      /* per body: 6, 6, 36 (compute scratch) */
+  double *Fb, *Bb;           /* per body: 6, 6 (compute scratch) */
+  int maxnc;
+  double *J, *W;             /* 6 x maxnc each (compute scratch) */
 } water_t;
 
 /* ------------------------------------------------------------------ counter-based normals */
@@ -572,11 +574,11 @@ static void free_water(water_t* w) {
   free(w->Mcopy);
   free(w->active);
   free(w->fdof);
-  free(w->mdof);
   free(w->dof_quat);
   free(w->Fb);
   free(w->Bb);
-  free(w->Sb);
+  free(w->J);
+  free(w->W);
   free(w);
 }
 
@@ -912,36 +914,33 @@ static int water_init(const mjModel* m, mjData* d, int instance) {
     for (int i = 0; i < w->nbody; i++) {
       if (w->bodies[i].has_am) w->any_am = 1;
     }
-    /* active bodies (with uvms.hydro, and their ancestors), force and mass dofs */
-    unsigned char* mark = (unsigned char*)calloc((size_t)m->nbody + (size_t)m->nv * 2 + 1, 1);
+    /* active bodies (with uvms.hydro, and their ancestors) and force dofs */
+    unsigned char* mark = (unsigned char*)calloc((size_t)m->nbody + (size_t)m->nv + 1, 1);
     w->active = (int*)malloc(sizeof(int) * (size_t)(m->nbody + 1));
     w->fdof = (int*)malloc(sizeof(int) * (size_t)(m->nv + 1));
-    w->mdof = (int*)malloc(sizeof(int) * (size_t)(m->nv + 1));
     w->dof_quat = (unsigned char*)calloc((size_t)m->nv + 1, 1);
     w->Mcopy = (double*)calloc((size_t)(m->nC > 0 ? m->nC : 1), sizeof(double));
     w->Fb = (double*)calloc(6 * (size_t)m->nbody, sizeof(double));
     w->Bb = (double*)calloc(6 * (size_t)m->nbody, sizeof(double));
-    w->Sb = (double*)calloc(36 * (size_t)m->nbody, sizeof(double));
-    if (!mark || !w->active || !w->fdof || !w->mdof || !w->dof_quat || !w->Mcopy || !w->Fb ||
-        !w->Bb || !w->Sb) {
+    for (int i = 0; i < w->nbody; i++)
+      if (w->bodies[i].nc > w->maxnc) w->maxnc = w->bodies[i].nc;
+    w->J = (double*)calloc(6 * (size_t)w->maxnc + 6, sizeof(double));
+    w->W = (double*)calloc(6 * (size_t)w->maxnc + 6, sizeof(double));
+    if (!mark || !w->active || !w->fdof || !w->dof_quat || !w->Mcopy || !w->Fb || !w->Bb ||
+        !w->J || !w->W) {
       fail(&e, "uvms.water: out of memory");
     } else {
       unsigned char* fmark = mark + m->nbody;
-      unsigned char* mmark = fmark + m->nv;
       for (int i = 0; i < w->nbody; i++) {
         const hbody_t* hb = w->bodies + i;
         if (!hb->nc) continue;
         for (int k = hb->body; k > 0; k = m->body_parentid[k]) mark[k] = 1;
-        for (int a = 0; a < hb->nc; a++) {
-          fmark[hb->chain[a]] = 1;
-          if (hb->has_am) mmark[hb->chain[a]] = 1;
-        }
+        for (int a = 0; a < hb->nc; a++) fmark[hb->chain[a]] = 1;
       }
       for (int k = 1; k < m->nbody; k++)
         if (mark[k]) w->active[w->nactive++] = k;
       for (int j = 0; j < m->nv; j++) {
         if (fmark[j]) w->fdof[w->nfdof++] = j;
-        if (mmark[j]) w->mdof[w->nmdof++] = j;
         int jnt = m->dof_jntid[j], type = m->jnt_type[jnt];
         w->dof_quat[j] = type == mjJNT_BALL || (type == mjJNT_FREE && j >= m->jnt_dofadr[jnt] + 3);
       }
@@ -1012,67 +1011,6 @@ static void current_at(const water_t* w, const mjtNum* s, double t, const double
   }
 }
 
-/* Add to S (6x6, MuJoCo's motion order: angular, linear; at the subtree centre of mass `com`,
- * world axes) the added mass A (frame h, Fossen's order) of a body whose frame h has the world
- * rotation R and origin p = com + o. Row k of J_h (the body Jacobian in frame h) is
- * Z_k . cdof with Z_k = (o x r_k, r_k) for the linear axes and Z_{3+k} = (r_k, 0) for the
- * angular ones (r_k: column k of R), so J_h^T A J_h = cdof^T (Z^T A Z) cdof: S += Z^T A Z. */
-static void add_spatial_mass(double S[36], const double A[36], const double R[9], const double o[3],
-                             int diag) {
-  if (diag) {
-    /* S = sum_k Mk_lin Z_k Z_k^T + Mk_ang Z_{3+k} Z_{3+k}^T, in 3x3 blocks */
-    for (int k = 0; k < 3; k++) {
-      const double r[3] = {R[k], R[3 + k], R[6 + k]};
-      double u[3];
-      cross3(u, o, r);
-      const double dv = A[7 * k], dw = A[7 * (3 + k)];
-      const double a[3] = {dv * r[0], dv * r[1], dv * r[2]};
-      const double b[3] = {dv * u[0], dv * u[1], dv * u[2]};
-      const double c[3] = {dw * r[0], dw * r[1], dw * r[2]};
-      for (int i = 0; i < 3; i++) {
-        double* Sa = S + 6 * i;       /* angular row i */
-        double* Sl = S + 6 * (3 + i); /* linear row i */
-        for (int j = 0; j < 3; j++) {
-          Sa[j] += b[i] * u[j] + c[i] * r[j];
-          Sa[3 + j] += b[i] * r[j];
-          Sl[j] += a[i] * u[j];
-          Sl[3 + j] += a[i] * r[j];
-        }
-      }
-    }
-    return;
-  }
-  double Z[36] = {0};
-  for (int k = 0; k < 3; k++) {
-    double r[3] = {R[k], R[3 + k], R[6 + k]}, u[3];
-    cross3(u, o, r);
-    double* zl = Z + 6 * k;
-    double* za = Z + 6 * (3 + k);
-    zl[0] = u[0];
-    zl[1] = u[1];
-    zl[2] = u[2];
-    zl[3] = r[0];
-    zl[4] = r[1];
-    zl[5] = r[2];
-    za[0] = r[0];
-    za[1] = r[1];
-    za[2] = r[2];
-  }
-  double T[36]; /* T = A Z */
-  for (int i = 0; i < 6; i++)
-    for (int j = 0; j < 6; j++) {
-      double sum = 0.0;
-      for (int k = 0; k < 6; k++) sum += A[6 * i + k] * Z[6 * k + j];
-      T[6 * i + j] = sum;
-    }
-  for (int i = 0; i < 6; i++) /* S += Z^T T */
-    for (int j = 0; j < 6; j++) {
-      double sum = 0.0;
-      for (int k = 0; k < 6; k++) sum += Z[6 * k + i] * T[6 * k + j];
-      S[6 * i + j] += sum;
-    }
-}
-
 /* cdof_dot of dof j as mj_jacDot uses it (ball and free-rotation dofs: cvel(body) x cdof) */
 static inline const double* cdof_dot(const mjModel* m, const mjData* d, int j, int quat,
                                      double tmp[6]) {
@@ -1103,7 +1041,6 @@ static void water_compute(const mjModel* m, mjData* d, int instance, int capabil
   const int add_mass = am_on && !(w->Mvalid && !memcmp(d->M, w->Mcopy, sizeof(mjtNum) * (size_t)m->nC));
 
   double* Fb = w->Fb;      /* per body: spatial force (torque about com, force), subtree sum */
-  double* Sb = w->Sb;      /* per body: spatial added mass (6x6), subtree sum */
   double* Bb = w->Bb;      /* per body: sum over its chain of qvel cdof_dot (bias) */
   const int* active = w->active;
   const int nactive = w->nactive;
@@ -1112,7 +1049,6 @@ static void water_compute(const mjModel* m, mjData* d, int instance, int capabil
   for (int ia = 0; ia < nactive; ia++) {
     const int k = active[ia];
     memset(Fb + 6 * k, 0, 6 * sizeof(double));
-    if (add_mass) memset(Sb + 36 * k, 0, 36 * sizeof(double));
     if (am_on) {
       double* B = Bb + 6 * k;
       const int par = m->body_parentid[k];
@@ -1228,7 +1164,46 @@ static void water_compute(const mjModel* m, mjData* d, int instance, int capabil
           tau[i] -= sum;
         }
       }
-      if (add_mass) add_spatial_mass(Sb + 36 * b, A, R, off, hb->diag_am);
+      if (add_mass) {
+        /* d->M += J^T M_A J over the body's chain: column a of J is (R^T (cdof_lin +
+         * cdof_ang x off), R^T cdof_ang) of dof chain[a]; the CSR row of chain[a] holds exactly
+         * chain[0..a] (checked at init), so entry (a, c) is at M_rowadr[chain[a]] + c */
+        const int nc = hb->nc;
+        const int* chain = hb->chain;
+        double* J = w->J;
+        double* W = w->W;
+        for (int a = 0; a < nc; a++) {
+          const double* cd = d->cdof + 6 * chain[a];
+          double cp[3];
+          cross3(cp, cd, off);
+          cp[0] += cd[3];
+          cp[1] += cd[4];
+          cp[2] += cd[5];
+          double* Ja = J + 6 * a;
+          mulT3(Ja, R, cp);
+          mulT3(Ja + 3, R, cd);
+          double* Wa = W + 6 * a;
+          if (hb->diag_am) {
+            for (int k = 0; k < 6; k++) Wa[k] = A[7 * k] * Ja[k];
+          } else {
+            for (int k = 0; k < 6; k++) {
+              const double* Ak = A + 6 * k;
+              Wa[k] = Ak[0] * Ja[0] + Ak[1] * Ja[1] + Ak[2] * Ja[2] + Ak[3] * Ja[3] +
+                      Ak[4] * Ja[4] + Ak[5] * Ja[5];
+            }
+          }
+        }
+        mjtNum* M = d->M;
+        for (int a = 0; a < nc; a++) {
+          const double* Ja = J + 6 * a;
+          const double j0 = Ja[0], j1 = Ja[1], j2 = Ja[2], j3 = Ja[3], j4 = Ja[4], j5 = Ja[5];
+          mjtNum* Mrow = M + m->M_rowadr[chain[a]];
+          for (int c = 0; c <= a; c++) {
+            const double* Wc = W + 6 * c;
+            Mrow[c] += j0 * Wc[0] + j1 * Wc[1] + j2 * Wc[2] + j3 * Wc[3] + j4 * Wc[4] + j5 * Wc[5];
+          }
+        }
+      }
     }
 
     if (use_damp) {
@@ -1312,11 +1287,6 @@ static void water_compute(const mjModel* m, mjData* d, int instance, int capabil
     double* Fp = Fb + 6 * par;
     const double* Fk = Fb + 6 * k;
     for (int c = 0; c < 6; c++) Fp[c] += Fk[c];
-    if (add_mass) {
-      double* Sp = Sb + 36 * par;
-      const double* Sk = Sb + 36 * k;
-      for (int c = 0; c < 36; c++) Sp[c] += Sk[c];
-    }
   }
 
   /* generalized forces: qfrc_passive[i] += cdof_i . F(subtree of the body of dof i) */
@@ -1328,27 +1298,7 @@ static void water_compute(const mjModel* m, mjData* d, int instance, int capabil
                           cd[5] * F[5];
   }
 
-  /* added mass: M[i][j] += cdof_i^T S(subtree of the body of dof i) cdof_j, j = i and its
-   * ancestors (row i of the CSR lower triangle, from its diagonal backwards) */
   if (add_mass) {
-    mjtNum* M = d->M;
-    for (int ii = 0; ii < w->nmdof; ii++) {
-      const int i = w->mdof[ii];
-      const double* cd = d->cdof + 6 * i;
-      const double* S = Sb + 36 * m->dof_bodyid[i];
-      double v[6];
-      for (int r = 0; r < 6; r++) {
-        const double* Sr = S + 6 * r;
-        v[r] = Sr[0] * cd[0] + Sr[1] * cd[1] + Sr[2] * cd[2] + Sr[3] * cd[3] + Sr[4] * cd[4] +
-               Sr[5] * cd[5];
-      }
-      int adr = m->M_rowadr[i] + m->M_rownnz[i] - 1;
-      for (int j = i; j >= 0; j = m->dof_parentid[j], adr--) {
-        const double* cj = d->cdof + 6 * j;
-        M[adr] += v[0] * cj[0] + v[1] * cj[1] + v[2] * cj[2] + v[3] * cj[3] + v[4] * cj[4] +
-                  v[5] * cj[5];
-      }
-    }
     mj_factorM(m, d);
     if (d->nefc) mj_projectConstraint(m, d);
     memcpy(w->Mcopy, d->M, sizeof(mjtNum) * (size_t)m->nC);
