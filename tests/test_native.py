@@ -7,15 +7,11 @@ where it cannot be built, e.g. without a C compiler. (The plant's hydrodynamics 
 plugins: tests/test_backends.py, tests/test_plugin_*.py.)
 """
 
-import gc
 import itertools
 import os
-import re
 import subprocess
 import sys
-import warnings
 
-import mujoco
 import numpy as np
 import pytest
 

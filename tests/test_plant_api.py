@@ -1,7 +1,5 @@
 """The Plant API: named accessors, bad input, divergence, several plants in one process."""
 
-import re
-import warnings
 from pathlib import Path
 
 import mujoco

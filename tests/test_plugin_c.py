@@ -189,9 +189,8 @@ def test_torque_about_body_axis_gives_T_over_I_plus_IA():
     d = mujoco.MjData(m)
     mujoco.mj_forward(m, d)
     R = d.xmat[1].reshape(3, 3).copy()
-    inertia = m.body_inertia[1] + np.array([0.0, 0.0, 0.0])
-    # the ballast sphere sits at the body origin: its own inertia adds to each axis
-    inertia = inertia + 0.4 * 0.001 * 0.01 ** 2
+    # the box's principal inertia plus that of the ballast sphere at the same centre
+    inertia = m.body_inertia[1] + 0.4 * 0.001 * 0.01 ** 2
     for axis in range(3):
         mujoco.mj_resetData(m, d)
         d.xfrc_applied[1, 3:] = 0.5 * R[:, axis]

@@ -36,16 +36,15 @@
  *               buoyancy (moved to p as a force plus the moment (cob - p) x F);
  *            qfrc_passive += J^T (tau_A + tau_D + tau_strip at p; forces at cob), which is what
  *            mj_applyFT computes.
- *            How (same maths, O(nbody + nv) plus the entries of M): nothing builds J, mj_jac or
- *            mj_jacDot. MuJoCo's motion axes cdof (and cdof_dot, cvel, subtree_com: the
- *            quantities mj_jac/mj_jacDot are made of) give, per body, nu (cvel moved to p),
- *            J_dot qvel (a forward pass summing qvel cdof_dot along the tree, as mj_jacDot does,
- *            ball/free rotations included), and the generalized forces and the added mass by
- *            subtree sums (a backward pass, like MuJoCo's own RNE/CRB): each body contributes
- *            its wrench as a spatial force F_b and its M_A as the 6x6 spatial matrix
- *            S_b = Z^T M_A Z at the subtree centre of mass (J = Z cdof); then
- *            qfrc_i += cdof_i . sum_{b below i} F_b and M_ij += cdof_i^T (sum_{b below i} S_b)
- *            cdof_j for every ancestor j of i (the CSR row of i, walked from its diagonal).
+ *            How (same maths, without mj_jac, mj_jacDot or mj_applyFT, which zero and fill
+ *            3 x nv arrays per call): MuJoCo's motion axes cdof (with cdof_dot, cvel and
+ *            subtree_com, what mj_jac and mj_jacDot are made of) give per body nu (its cvel moved
+ *            to p), J_dot qvel (a forward pass summing qvel cdof_dot along the tree, ball and
+ *            free rotations handled as mj_jacDot does), the columns of J over the body's dof
+ *            chain (for J^T M_A J, added to the rows of the chain: the CSR row of chain[a]
+ *            holds exactly chain[0..a]), and the generalized forces by subtree sums of spatial
+ *            forces (a backward pass as in MuJoCo's RNE): qfrc_i += cdof_i . sum_{b below i} F_b
+ *            with F_b = (t + (p - com) x f, f) for the world force f and torque t about p.
  *            tests/test_plugin_c.py checks both against mj_jac, mj_jacDot and mj_applyFT.
  *   advance: (after each mj_step, every integrator: MuJoCo's mj_advance, which Euler,
  *            implicit, implicitfast and RK4 (once, at the end of its 4 stages) all call)
