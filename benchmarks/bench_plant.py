@@ -19,6 +19,7 @@ real-time factor (simulated seconds per wall-clock second).
 from __future__ import annotations
 
 import argparse
+import gc
 import time
 from pathlib import Path
 
@@ -101,7 +102,11 @@ def main() -> None:
     for robot, label, what, us, ratio, rtf in rows:
         print(f"{robot:<18}{label:<17}{what:<12}{us:>9.2f}{ratio:>8.2f}{rtf:>8.0f}x")
 
-    # rollout: N runs of 1 s of the 3-D robot from random velocities, 1 vs 2 threads
+    # rollout: N runs of 1 s of the 3-D robot from random velocities, 1 vs 2 threads (with no
+    # Python mjcb_passive left installed by the python rows above)
+    del served, d
+    gc.collect()
+    assert mujoco.get_mjcb_passive() is None
     m = pm.compile_spec(pm.load_spec(ROBOTS["robot3d (10 dof)"]), native=True)
     nstep = int(round(1.0 / m.opt.timestep))
     rng = np.random.default_rng(1)

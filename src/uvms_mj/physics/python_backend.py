@@ -69,6 +69,10 @@ def _unregister(addr: int) -> None:
     # Runs from the garbage collector at any point: no lock (single dict operations are atomic).
     _HANDLERS.pop(addr, None)
     _FAILURES.pop(addr, None)
+    if not _HANDLERS and mujoco.get_mjcb_passive() is _C_DISPATCH:
+        # Nothing left to serve: stop calling into Python from every passive stage of every
+        # model (which would also serialise multi-threaded rollouts on the GIL).
+        mujoco.set_mjcb_passive(None)
 
 
 def csr_indices(m: mujoco.MjModel) -> tuple[np.ndarray, np.ndarray]:
