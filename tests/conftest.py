@@ -68,3 +68,16 @@ def native_available() -> bool:
     from uvms_mj.physics import build
 
     return build.register_plugins()
+
+
+def added_and_passive(m: mujoco.MjModel, d: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
+    """(added-mass matrix, generalized force) that the water adds at d's state: the full M after
+    mj_forward minus the rigid M of mj_fwdPosition (no passive stage), and qfrc_passive (for
+    models with no springs, joint damping or MuJoCo fluid forces, all of it is the water's)."""
+    mujoco.mj_fwdPosition(m, d)
+    rigid = np.zeros((m.nv, m.nv))
+    mujoco.mj_fullM(m, d, rigid)
+    mujoco.mj_forward(m, d)
+    full = np.zeros((m.nv, m.nv))
+    mujoco.mj_fullM(m, d, full)
+    return full - rigid, d.qfrc_passive.copy()

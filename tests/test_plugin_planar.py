@@ -16,24 +16,17 @@ import pytest
 from uvms_mj import HydroTerms, Plant
 from uvms_mj.hydro import HydroModel
 
+from conftest import added_and_passive
+
 TOL = 1e-10
 
 
 def plugin_terms(plant: Plant, q, qd) -> tuple[np.ndarray, np.ndarray]:
-    """(added-mass matrix, hydrodynamic generalized force) of the plant's own hydrodynamics at
-    (q, qd): full M after mj_forward minus the rigid M (mj_fwdPosition, no passive stage), and
-    qfrc_passive (the paper's model has no springs, dampers or MuJoCo fluid forces)."""
-    m = plant.model
+    """The plant's own hydrodynamics at (q, qd) on fresh data of its model."""
     d = plant.make_data()
     d.qpos[:] = q
     d.qvel[:] = qd
-    mujoco.mj_fwdPosition(m, d)
-    rigid = np.zeros((m.nv, m.nv))
-    mujoco.mj_fullM(m, d, rigid)
-    mujoco.mj_forward(m, d)
-    full = np.zeros((m.nv, m.nv))
-    mujoco.mj_fullM(m, d, full)
-    return full - rigid, d.qfrc_passive.copy()
+    return added_and_passive(plant.model, d)
 
 
 def oracle(plant: Plant, q, qd, current, terms: HydroTerms) -> tuple[np.ndarray, np.ndarray]:

@@ -19,6 +19,8 @@ import pytest
 from uvms_mj.physics import model as pm
 from uvms_mj.physics import reference
 
+from conftest import added_and_passive
+
 MODELS = Path(__file__).parent / "models"
 TOL = 1e-12
 
@@ -44,19 +46,6 @@ def load(name: str, **water: str) -> mujoco.MjModel:
     return pm.compile_spec(spec, native=True, source=name)
 
 
-def split(m: mujoco.MjModel, d: mujoco.MjData) -> tuple[np.ndarray, np.ndarray]:
-    """(added-mass matrix, plugin generalized force) at d's state: full M after mj_forward
-    minus the rigid M of mj_fwdPosition; qfrc_passive (these models have no springs, joint
-    damping or MuJoCo fluid forces)."""
-    mujoco.mj_fwdPosition(m, d)
-    rigid = np.zeros((m.nv, m.nv))
-    mujoco.mj_fullM(m, d, rigid)
-    mujoco.mj_forward(m, d)
-    full = np.zeros((m.nv, m.nv))
-    mujoco.mj_fullM(m, d, full)
-    return full - rigid, d.qfrc_passive.copy()
-
-
 def random_state(m: mujoco.MjModel, d: mujoco.MjData, rng: np.random.Generator) -> None:
     mujoco.mj_resetData(m, d)
     d.qpos[:3] = rng.uniform(-1, 1, 3)
@@ -79,7 +68,7 @@ def test_plugin_matches_reference(name, current, rng):
         for _ in range(k):
             mujoco.mj_step(m, d)
         d.time += 0.3 * m.opt.timestep if current == "gauss_markov" else 0.0
-        M, Q = split(m, d)
+        M, Q = added_and_passive(m, d)
         M0, Q0 = reference.passive(m, d, info.water, info.bodies, pm.current_state_of(m, d))
         assert np.max(np.abs(M - M0)) <= TOL * max(1.0, np.max(np.abs(M0)))
         assert np.max(np.abs(Q - Q0)) <= TOL * max(1.0, np.max(np.abs(Q0)))
@@ -93,7 +82,7 @@ def test_each_term_alone_matches_reference(terms, rng):
     d = mujoco.MjData(m)
     for _ in range(5):
         random_state(m, d, rng)
-        M, Q = split(m, d)
+        M, Q = added_and_passive(m, d)
         M0, Q0 = reference.passive(m, d, info.water, info.bodies, pm.current_state_of(m, d))
         assert np.max(np.abs(M - M0)) <= TOL * max(1.0, np.max(np.abs(M0)))
         assert np.max(np.abs(Q - Q0)) <= TOL * max(1.0, np.max(np.abs(Q0)))

@@ -63,34 +63,9 @@ class HydroTerms:
             raise ValueError(f"HydroTerms.buoyancy = {self.buoyancy!r}; allowed: True, False")
 
 
-def _poly_piece(w0: float, om: float, a: float, b: float) -> tuple[float, float]:
-    """int_a^b w^2 ds and int_a^b s w^2 ds for w = w0 + om s (no sign)."""
-    a2, b2 = a * a, b * b
-    a3, b3 = a2 * a, b2 * b
-    d1, d2, d3, d4 = b - a, b2 - a2, b3 - a3, b2 * b2 - a2 * a2
-    w02, wom, om2 = w0 * w0, w0 * om, om * om
-    return (w02 * d1 + wom * d2 + om2 * d3 / 3.0, 0.5 * w02 * d2 + (2.0 / 3.0) * wom * d3 + 0.25 * om2 * d4)
-
-
-def strip_integrals(w0: float, om: float, a: float, b: float) -> tuple[float, float]:
-    """Exact strip-theory integrals for a linear normal velocity (paper Eqs. 2-3).
-
-    Returns (int_a^b |w| w ds, int_a^b s |w| w ds) with w(s) = w0 + om * s, a <= b.
-    Never divides by ``om``: the interval is split at the sign change s* = -w0/om (only when
-    it lies strictly inside), and each piece, of constant sign, is an exact polynomial.
-    """
-    if om != 0.0:
-        s0 = -w0 / om
-        if a < s0 < b:
-            i0, i1 = _poly_piece(w0, om, a, s0)
-            j0, j1 = _poly_piece(w0, om, s0, b)
-            sa = 1.0 if w0 + om * a > 0 else -1.0
-            return sa * (i0 - j0), sa * (i1 - j1)
-    wm = w0 + om * 0.5 * (a + b)
-    if wm == 0.0:
-        return 0.0, 0.0
-    i0, i1 = _poly_piece(w0, om, a, b)
-    return (i0, i1) if wm > 0 else (-i0, -i1)
+# The exact strip-theory integrals (paper Eqs. 2-3) are shared with the generic 3-D reference
+# (the C plugins have their own port, so the plant-vs-planar comparison stays independent).
+from .physics.reference import strip_integrals  # noqa: E402
 
 
 class HydroModel:
