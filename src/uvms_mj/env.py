@@ -2,7 +2,7 @@
 
 ``load()`` builds a :class:`dm_control.rl.control.Environment` (a ``dm_env.Environment``) whose
 physics is the SAME plant as everywhere else in uvms_mj (hydrodynamics included): the
-:class:`Physics` wraps ``plant.data``, which the plant's passive callback serves, and advances
+:class:`Physics` wraps ``plant.data``, which is in water (the model's plugins), and advances
 it with :meth:`uvms_mj.plant.Plant.step` (``mj_step``, whatever the integrator), so an env step
 is bit for bit the plant's own stepping.
 
@@ -229,7 +229,7 @@ class Physics(dm_mujoco.Physics):
         return new
 
     def __getstate__(self):  # noqa: D105
-        raise TypeError("a uvms_mj Physics cannot be pickled (its hydrodynamics live in the plant's callback)")
+        raise TypeError("a uvms_mj Physics cannot be pickled (it lives on its plant, whose hydrodynamics it shares)")
 
 
 # --------------------------------------------------------------------------- sensor

@@ -13,7 +13,8 @@ any other MjData of that model) include them with every integrator (Euler, impli
 Two backends compute the same hydrodynamics (``Plant(backend=...)``, default from
 ``$UVMS_MJ_BACKEND``, else "auto"): "native", the C plugins compiled into the model, and
 "python", the numpy reference (:mod:`uvms_mj.physics.reference`) served through
-``mjcb_passive`` on a copy of the model with the plugins stripped; "auto" takes native when the
+``mjcb_passive`` (the model's plugins compiled with every term off, or stripped where they
+cannot be built); "auto" takes native when the
 plugin library can be built. Frames: world X horizontal, Y up; angles counter-clockwise positive.
 
 The plant adds to MuJoCo only what a simulation run needs around it: parameter overrides,

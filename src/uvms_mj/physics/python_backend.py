@@ -1,8 +1,9 @@
 """The numpy reference hydrodynamics served through MuJoCo's ``mjcb_passive`` (no C compiler).
 
-Where the uvms plugin library cannot be built, :func:`uvms_mj.physics.model.compile_spec` strips
-the plugins from the model and this module applies :func:`uvms_mj.physics.reference.passive`
-instead, at the same point of MuJoCo's pipeline (the passive stage, after ``mj_makeM`` /
+Where the uvms plugin library cannot be built, :func:`uvms_mj.physics.model.load_spec` strips
+the plugins from the model (and where it can, but the Python backend is asked for,
+:func:`~uvms_mj.physics.model.compile_spec` compiles them with every term off); this module
+applies :func:`uvms_mj.physics.reference.passive` instead, at the same point of MuJoCo's pipeline (the passive stage, after ``mj_makeM`` /
 ``mj_factorM``, before the acceleration solve), so every integrator honours it:
 
 * the added-mass matrix is added to ``d.M`` (MuJoCo's sparse lower triangle), then
@@ -13,7 +14,9 @@ instead, at the same point of MuJoCo's pipeline (the passive stage, after ``mj_m
 which abort with "Python exception raised" for every model they do not know (compilation runs
 the passive stage on a temporary model); a ctypes function is installed instead, and it
 dispatches on the mjData address to the handler that serves it; every other model and data is
-left untouched. The Gauss-Markov current is advanced by :meth:`Served.advance`, which the owner
+left untouched. While any data is served, every model's passive stage calls into Python (which
+also serialises multi-threaded rollouts on the GIL); the callback is removed when nothing is
+served any more. The Gauss-Markov current is advanced by :meth:`Served.advance`, which the owner
 (the :class:`uvms_mj.plant.Plant`) calls after every ``mj_step``; plain ``mj_step`` on such data
 keeps the current of the last sample.
 """
