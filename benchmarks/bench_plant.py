@@ -2,8 +2,9 @@
 
     python benchmarks/bench_plant.py [--seconds 10] [--repeats 5] [--rollouts 64]
 
-For each robot (the paper's planar robot ``models/scene.xml`` and the 3-D test robot
-``tests/models/robot3d.xml``: a free-floating base with a 4-link arm) and each setting (RK4 at
+For each robot (the paper's planar robot ``models/scene.xml``, the 3-D test robot
+``tests/models/robot3d.xml``: a free-floating base with a 4-link arm, and the BlueROV2 Heavy
+with an Alpha-class arm ``models/bluerov2_alpha.xml``) and each setting (RK4 at
 the model's step, Euler at 1/600 s), plain ``mujoco.mj_step`` loops on:
 
 * bare: the same model file with the uvms plugins removed (no hydrodynamics);
@@ -32,7 +33,8 @@ from uvms_mj.physics import build, model as pm
 from uvms_mj.physics import python_backend
 
 ROOT = Path(__file__).resolve().parents[1]
-ROBOTS = {"paper (5 dof)": default_model_path(), "robot3d (10 dof)": ROOT / "tests" / "models" / "robot3d.xml"}
+ROBOTS = {"paper (5 dof)": default_model_path(), "robot3d (10 dof)": ROOT / "tests" / "models" / "robot3d.xml",
+          "bluerov2_alpha (10 dof)": ROOT / "models" / "bluerov2_alpha.xml"}
 
 
 def best_time(fn, n: int, repeats: int) -> float:
@@ -68,7 +70,8 @@ def main() -> None:
     rows = []
     for robot, path in ROBOTS.items():
         spec = pm.load_spec(path)
-        for label, integrator, dt in (("RK4, model step", None, None), ("Euler, 1/600 s", mujoco.mjtIntegrator.mjINT_EULER, 1 / 600)):
+        settings = (("RK4, model step", None, None), ("Euler, 1/600 s", mujoco.mjtIntegrator.mjINT_EULER, 1 / 600))
+        for label, integrator, dt in settings:
             models = {"bare": pm.compile_spec(spec, native=False), "plugin": pm.compile_spec(spec, native=True),
                       "python": pm.compile_spec(spec, native=False)}
             for m in models.values():
@@ -98,9 +101,9 @@ def main() -> None:
 
     print(f"mujoco {mujoco.__version__}; {args.seconds:g} s simulated, best of {args.repeats} "
           "(python: 1/20 of the steps, once)")
-    print(f"{'robot':<18}{'setting':<17}{'run':<12}{'us/step':>9}{'x bare':>8}{'RTF':>9}")
+    print(f"{"robot":<25}{"setting":<17}{'run':<12}{'us/step':>9}{'x bare':>8}{'RTF':>9}")
     for robot, label, what, us, ratio, rtf in rows:
-        print(f"{robot:<18}{label:<17}{what:<12}{us:>9.2f}{ratio:>8.2f}{rtf:>8.0f}x")
+        print(f"{robot:<25}{label:<17}{what:<12}{us:>9.2f}{ratio:>8.2f}{rtf:>8.0f}x")
 
     # rollout: N runs of 1 s of the 3-D robot from random velocities, 1 vs 2 threads (with no
     # Python mjcb_passive left installed by the python rows above)
