@@ -101,7 +101,7 @@ def main() -> None:
 
     print(f"mujoco {mujoco.__version__}; {args.seconds:g} s simulated, best of {args.repeats} "
           "(python: 1/20 of the steps, once)")
-    print(f"{"robot":<25}{"setting":<17}{'run':<12}{'us/step':>9}{'x bare':>8}{'RTF':>9}")
+    print(f"{'robot':<25}{'setting':<17}{'run':<12}{'us/step':>9}{'x bare':>8}{'RTF':>9}")
     for robot, label, what, us, ratio, rtf in rows:
         print(f"{robot:<25}{label:<17}{what:<12}{us:>9.2f}{ratio:>8.2f}{rtf:>8.0f}x")
 
