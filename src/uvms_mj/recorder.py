@@ -642,7 +642,14 @@ def check_output_path(path: str | os.PathLike, protect: tuple = (), kind: str = 
         if not os.access(p, os.W_OK):
             raise OutputPathError(f"{p}: is not writable")
         return p
-    parent = absolute.parent
+    _check_creatable(p, absolute.parent)
+    return p
+
+
+def _check_creatable(p: Path, start: Path) -> None:
+    """``start`` (a folder to write into) exists, or can be created: its nearest existing
+    ancestor is a writable folder (no dangling symbolic link on the way)."""
+    parent = start
     while not parent.exists():
         if parent.is_symlink():
             raise OutputPathError(f"{p}: {parent} is a dangling symbolic link")
@@ -651,7 +658,6 @@ def check_output_path(path: str | os.PathLike, protect: tuple = (), kind: str = 
         raise OutputPathError(f"{p}: {parent} is a file, not a folder")
     if not os.access(parent, os.W_OK | os.X_OK):
         raise OutputPathError(f"{p}: the folder {parent} is not writable")
-    return p
 
 
 def check_output_dir(path: str | os.PathLike) -> Path:
@@ -666,13 +672,7 @@ def check_output_dir(path: str | os.PathLike) -> Path:
                 raise OutputPathError(f"{p}: {root} is not a place to write results to")
     if p.exists() and not p.is_dir():
         raise OutputPathError(f"{p}: exists and is not a folder")
-    parent = absolute
-    while not parent.exists():
-        parent = parent.parent
-    if not parent.is_dir():
-        raise OutputPathError(f"{p}: {parent} is a file, not a folder")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise OutputPathError(f"{p}: the folder {parent} is not writable")
+    _check_creatable(p, absolute)
     return p
 
 
