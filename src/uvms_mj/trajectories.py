@@ -44,6 +44,8 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
+from .trajectory import trapezoid_profile
+
 __all__ = [
     "Trajectory",
     "Line3D",
@@ -258,13 +260,8 @@ class Line3D(Trajectory):
 
     @cached_property
     def profile(self) -> tuple[float, float, float]:
-        """(peak speed v [m/s], ramp time t_r [s], cruise time t_c [s])."""
-        v, a, L = self.cruise_speed, self.accel, self.length
-        if v * v / a > L:  # triangular
-            v = math.sqrt(a * L)
-        t_ramp = v / a
-        t_cruise = (L - v * t_ramp) / v if v > 0 else 0.0
-        return v, t_ramp, t_cruise
+        """(peak speed v [m/s], ramp time t_r [s], cruise time t_c [s]): the planar line's profile."""
+        return trapezoid_profile(self.cruise_speed, self.accel, self.length)
 
     @property
     def duration(self) -> float:

@@ -14,6 +14,18 @@ from functools import cached_property
 import numpy as np
 
 
+def trapezoid_profile(cruise_speed: float, accel: float, length: float) -> tuple[float, float, float]:
+    """(peak speed v [m/s], ramp time t_r [s], cruise time t_c [s]) of a rest-to-rest move over
+    ``length`` with constant acceleration ``accel`` up to ``cruise_speed`` (triangular, with
+    v = sqrt(accel length), when the line is too short to reach it)."""
+    v, a, L = cruise_speed, accel, length
+    if v * v / a > L:  # triangular
+        v = math.sqrt(a * L)
+    t_ramp = v / a
+    t_cruise = (L - v * t_ramp) / v if v > 0 else 0.0
+    return v, t_ramp, t_cruise
+
+
 @dataclass(frozen=True)
 class StraightLine:
     """Straight end-tip path from ``start`` to ``target`` (world frame, m).
@@ -63,12 +75,7 @@ class StraightLine:
     @cached_property
     def _profile_cached(self) -> tuple[float, float, float]:
         """(peak speed, ramp time, cruise time)."""
-        v, a, L = self.cruise_speed, self.accel, self.length
-        if v * v / a > L:  # triangular
-            v = math.sqrt(a * L)
-        t_ramp = v / a
-        t_cruise = (L - v * t_ramp) / v if v > 0 else 0.0
-        return v, t_ramp, t_cruise
+        return trapezoid_profile(self.cruise_speed, self.accel, self.length)
 
     @property
     def duration(self) -> float:
