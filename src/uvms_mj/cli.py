@@ -46,7 +46,10 @@ METRIC_LABELS = {
     "thrust_rms_N": "thrust RMS [N]",
     "torque_rms_Nm": "joint torque RMS [N m]",
     "saturated_s": "thrusters saturated [s]",
+    "joint_rms_mrad": "arm joints RMS [mrad]",
 }
+#: Rows shown only when some run has a value (floating-robot metrics).
+_OPTIONAL_ROWS = ("joint_rms_mrad",)
 
 
 def metrics_table(results: dict[str, dict[str, float]], status: dict[str, str] | None = None) -> str:
@@ -59,6 +62,8 @@ def metrics_table(results: dict[str, dict[str, float]], status: dict[str, str] |
         lines.append(f"{'status':<28}" + "".join(f"{status.get(n, '?'):>12}" for n in names))
     for key, label in METRIC_LABELS.items():
         vals = [results[n].get(key, float("nan")) for n in names]
+        if key in _OPTIONAL_ROWS and all(v != v for v in vals):
+            continue
         line = f"{label:<28}" + "".join(f"{v:>12.4g}" for v in vals)
         if ratio:
             line += f"{(vals[1] / vals[0]) if vals[0] else float('nan'):>9.2f}"
@@ -236,10 +241,16 @@ def _run_one(scenario, out: Path, progress: bool = True, source: str | None = No
         raise click.UsageError(str(exc)) from None
     _warn(scenario)
     meta = {"scenario": resolved(scenario), "seed": scenario.seed}
+    rec_kw = {}
+    if getattr(plant, "layout", None) is not None:  # a floating robot: the recorder describes it from its model
+        from .robot_scenario import robot_info
+
+        meta["robot"] = robot_info(scenario, plant)
+        rec_kw["model"] = plant.model
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
         with _progress(f"{scenario.name} [{scenario.controller.name}]", "sample") as tick, handle_sigterm(), \
-                McapRecorder(out, plant.params, meta) as rec:
+                McapRecorder(out, plant.params, meta, **rec_kw) as rec:
             try:
                 res = run_scenario(scenario, sink=rec.write_sample, on_sample=tick if progress else None,
                                    built=(plant, ctrl))

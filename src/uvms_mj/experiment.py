@@ -102,6 +102,8 @@ def metrics(result: RunResult) -> dict[str, float]:
     against the desired one), RMS thrust, and time with a thruster saturated. All NaN when the
     run has no sample with these signals (never raises for a short or broken run)."""
     s = result.signals
+    if "base_desired" in s or (result.meta or {}).get("robot"):
+        return robot_metrics(result)
     needed = ("p_desired", "q_true", "tip_true", "thrust_force", "torques")
     if any(k not in s or len(s[k]) == 0 for k in needed):
         # A run that stopped before its first sample (or a log without these signals): no metrics.
@@ -124,3 +126,56 @@ def metrics(result: RunResult) -> dict[str, float]:
         "torque_rms_Nm": rms(s["torques"]),
         "saturated_s": float(np.any(s["thrust_saturated"], axis=1).sum() * T) if "thrust_saturated" in s else 0.0,
     }
+
+
+def _base_qpos(result: RunResult) -> int:
+    robot = (result.meta or {}).get("robot") or {}
+    return int((robot.get("layout") or {}).get("base_qpos", 0))
+
+
+def robot_metrics(result: RunResult) -> dict[str, float]:
+    """The :data:`METRIC_KEYS` of a floating-robot run (any robot), from the true state against
+    the controller's ``base_desired`` (position world + quaternion) and, when logged,
+    ``tip_desired`` (world) and ``joints_desired``:
+
+    * base position error: |p_d - p| [mm]; attitude error: the angle of the rotation between the
+      desired and the true orientation, 2 acos |<q_d, q>| [mrad];
+    * tip: |tip_d - tip| [mm] (NaN without ``tip_desired``); ``joint_rms_mrad``: RMS over
+      samples and joints of q_d - q (NaN without ``joints_desired``);
+    * thrust and torque RMS; ``saturated_s``: time with a thruster at its force limit (from
+      ``thrust_force`` against the logged limits, 0 when unknown).
+
+    A metric whose signal is missing is NaN; never raises."""
+    s = result.signals
+    nan = float("nan")
+    out = {k: nan for k in METRIC_KEYS}
+    out["joint_rms_mrad"] = nan
+    rms = lambda x: float(np.sqrt(np.mean(np.square(x)))) if np.size(x) else nan  # noqa: E731
+    q = s.get("q_true")
+    if q is None or len(q) == 0:
+        return out
+    a = _base_qpos(result)
+    bd = s.get("base_desired")
+    if bd is not None and len(bd) == len(q):
+        e = np.linalg.norm(bd[:, :3] - q[:, a:a + 3], axis=1)
+        dots = np.abs(np.sum(bd[:, 3:7] * q[:, a + 3:a + 7], axis=1)
+                      / (np.linalg.norm(bd[:, 3:7], axis=1) * np.linalg.norm(q[:, a + 3:a + 7], axis=1)))
+        ang = 2.0 * np.arccos(np.clip(dots, 0.0, 1.0))
+        out.update(base_pos_rms_mm=1e3 * rms(e), base_pos_max_mm=1e3 * float(e.max()),
+                   base_att_rms_mrad=1e3 * rms(ang), base_att_max_mrad=1e3 * float(ang.max()))
+    td, tip = s.get("tip_desired"), s.get("tip_true")
+    if td is not None and tip is not None and len(td) == len(tip):
+        e = np.linalg.norm(td - tip, axis=1)
+        out.update(tip_rms_mm=1e3 * rms(e), tip_max_mm=1e3 * float(np.max(e)))
+    jd = s.get("joints_desired")
+    robot = (result.meta or {}).get("robot") or {}
+    jq = (robot.get("layout") or {}).get("joint_qpos")
+    if jd is not None and jq is not None and len(jd) == len(q) and jd.shape[1] == len(jq):
+        out["joint_rms_mrad"] = 1e3 * rms(jd - q[:, jq])
+    if "thrust_force" in s:
+        out["thrust_rms_N"] = rms(s["thrust_force"])
+    if "torques" in s:
+        out["torque_rms_Nm"] = rms(s["torques"])
+    out["saturated_s"] = float(np.any(s["thrust_saturated"], axis=1).sum() * result.meta.get("T", 0.02)) \
+        if "thrust_saturated" in s else 0.0
+    return out

@@ -85,6 +85,60 @@ def _quantize(x: np.ndarray, quantum: float) -> np.ndarray:
     return np.round(x / quantum) * quantum if quantum > 0 else x
 
 
+def controller_name(controller: Controller) -> str:
+    """The controller's registry name, else its class name (a plug-in created directly)."""
+    return str(getattr(controller, "name", "") or type(controller).__name__)
+
+
+def _small_rotation(rv: np.ndarray) -> np.ndarray:
+    """Quaternion (w, x, y, z) of the rotation vector rv [rad]."""
+    a = float(np.linalg.norm(rv))
+    if a < 1e-300:
+        return np.array([1.0, 0.0, 0.0, 0.0])
+    return np.concatenate(([math.cos(a / 2)], math.sin(a / 2) * rv / a))
+
+
+def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    w1, x1, y1, z1 = a
+    w2, x2, y2, z2 = b
+    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
+
+
+def measure_robot(plant, layout, sensor: SensorModel, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray | None]:
+    """(qpos, qvel or None) as measured on a floating robot (:class:`uvms_mj.robot.RobotPlant`).
+
+    Noise: ``position_noise`` on the vehicle's world position (3), ``attitude_noise`` as a
+    body-frame rotation vector with that std per axis composed with the true orientation
+    (q_meas = q_true * exp(n)), ``joint_noise`` on the joint angles; quantization of the position
+    (``position_quantum``) and the joint angles (``angle_quantum``; the quaternion is not
+    quantized); ``velocity_sensor``: the true qvel (v world, omega body, joint rates) plus
+    ``velocity_noise``. Random numbers are drawn in that order, only for non-zero stds.
+    """
+    q = plant.q
+    a = layout.base_qadr
+    att_noise = sensor.angle_noise if sensor.attitude_noise is None else sensor.attitude_noise
+    joint_noise = sensor.angle_noise if sensor.joint_noise is None else sensor.joint_noise
+    if sensor.position_noise:
+        q[a:a + 3] += rng.normal(0.0, sensor.position_noise, 3)
+    if att_noise:
+        qq = _quat_mul(q[a + 3:a + 7], _small_rotation(rng.normal(0.0, att_noise, 3)))
+        q[a + 3:a + 7] = qq / np.linalg.norm(qq)
+    ja = layout.joint_qadr
+    if joint_noise and len(ja):
+        q[ja] += rng.normal(0.0, joint_noise, len(ja))
+    if sensor.position_quantum:
+        q[a:a + 3] = _quantize(q[a:a + 3], sensor.position_quantum)
+    if sensor.angle_quantum and len(ja):
+        q[ja] = _quantize(q[ja], sensor.angle_quantum)
+    qd = None
+    if sensor.velocity_sensor:
+        qd = plant.qd
+        if sensor.velocity_noise:
+            qd = qd + rng.normal(0.0, sensor.velocity_noise, qd.size)
+    return q, qd
+
+
 def run_closed_loop(
     plant: Plant,
     controller: Controller,
@@ -126,8 +180,17 @@ def run_closed_loop(
     noisy = bool(sensor.position_noise or att_noise or joint_noise)
     quantized = bool(sensor.position_quantum or sensor.angle_quantum)
 
+    layout = getattr(plant, "layout", None)  # a RobotPlant (any robot): its own measurement layout
+
     def measure(k: int) -> Measurement:
         nonlocal q_prev_meas
+        if layout is not None:
+            q, qd = measure_robot(plant, layout, sensor, rng)
+            if sensor.delay:
+                q_out = q if q_prev_meas is None else q_prev_meas
+                q_prev_meas = q
+                q = q_out
+            return Measurement(k=k, t=k * T, q=q, qd=qd)
         q = plant.q
         if noisy:
             q = q + np.concatenate((rng.normal(0, sensor.position_noise, 2), rng.normal(0, angle_std)))
@@ -158,7 +221,10 @@ def run_closed_loop(
         plant.set_thrust(cmd.thrust)
         plant.set_joint_torques(cmd.torques)
         if k == 0 and warm_start:
-            plant.data.act[plant._thr_act] = np.clip(cmd.thrust, plant._thr_lo, plant._thr_hi)
+            if layout is not None:
+                plant.warm_start(cmd.thrust)
+            else:
+                plant.data.act[plant._thr_act] = np.clip(cmd.thrust, plant._thr_lo, plant._thr_hi)
         times.append(k * T)
         row = dict(cmd.signals)
         row.update(
@@ -180,7 +246,7 @@ def run_closed_loop(
             status, reason = "diverged", str(exc)
             break
     signals = {key: np.asarray(v) for key, v in rec.items()}
-    meta = {"T": T, "dt": dt, "seed": seed, "controller": controller.name}
+    meta = {"T": T, "dt": dt, "seed": seed, "controller": controller_name(controller)}
     warned = mujoco_warnings(clear=True)
     if warned:
         meta["mujoco_warnings"] = warned

@@ -38,7 +38,7 @@ from .hydro import HydroTerms
 from .params import ParameterError
 from .physics import model as _pm
 from .plant import Plant, _resolve_backend, install_mujoco_warning_handler, models_dir
-from .thrusters import thruster_actuators, thruster_curves, thrust_commands
+from .thrusters import CurveInverse, thruster_actuators, thruster_curves
 
 __all__ = [
     "BUILTIN_ROBOTS",
@@ -220,7 +220,9 @@ class Layout:
 
     def describe(self) -> dict:
         """JSON-able summary (for log metadata)."""
-        return {"base": self.base_name, "joints": list(self.joint_names), "thrusters": list(self.thruster_names),
+        return {"base": self.base_name, "base_qpos": self.base_qadr, "base_qvel": self.base_dadr,
+                "joint_qpos": self.joint_qadr.tolist(), "joint_qvel": self.joint_dadr.tolist(),
+                "joints": list(self.joint_names), "thrusters": list(self.thruster_names),
                 "motors": list(self.motor_names), "motor_joints": list(self.motor_joints),
                 "tip_site": self.tip_name, "bodies": list(self.body_names)}
 
@@ -529,6 +531,12 @@ class RobotPlant(Plant):
         self._thr_lo, self._thr_hi = (m.actuator_forcerange[self._thr].T.copy() if len(self._thr)
                                       else (np.zeros(0), np.zeros(0)))
         self._curves = thruster_curves(m) if len(self._thr) else []
+        # Thrusters sharing a curve and command range are inverted / evaluated together.
+        groups: dict = {}
+        for k, (c, a) in enumerate(zip(self._curves, self._thr)):
+            rng = tuple(m.actuator_ctrlrange[a]) if m.actuator_ctrllimited[a] else (None, None)
+            groups.setdefault((c, rng), []).append(k)
+        self._groups = [(np.array(ks), c, CurveInverse(c, *rng)) for (c, rng), ks in groups.items()]
         self._tip = lay.tip_site
         self._body_ids = list(range(1, m.nbody))
         self._diverged = None
@@ -590,7 +598,9 @@ class RobotPlant(Plant):
         if not len(self._thr):
             return np.zeros(0)
         u = self.data.act[self._thr_act] if self._thr_lagged else self.data.ctrl[self._thr]
-        f = np.array([c(x) for c, x in zip(self._curves, u)], dtype=float).ravel()
+        f = np.empty(u.size)
+        for ks, c, _ in self._groups:
+            f[ks] = c(u[ks])
         return np.clip(f, self._thr_lo, self._thr_hi)
 
     @property
@@ -600,7 +610,11 @@ class RobotPlant(Plant):
 
     def thrust_to_ctrl(self, thrust: Sequence[float]) -> np.ndarray:
         """Actuator commands for thrusts [N] (inverse of the model's curve, clamped)."""
-        return thrust_commands(self.model, thrust, list(self.layout.thruster_names))
+        f = np.asarray(thrust, dtype=float).ravel()
+        u = np.empty(f.size)
+        for ks, _, inv in self._groups:
+            u[ks] = inv(f[ks])
+        return u
 
     def warm_start(self, thrust: Sequence[float]) -> None:
         """Start the thrusters' lag states at the commands for ``thrust`` (holding station)."""

@@ -581,6 +581,8 @@ class Scenario(_Section):
     name: str = Field("scenario", pattern=r"^[A-Za-z0-9][A-Za-z0-9_.-]*$", max_length=NAME_MAX,
                       description="letters, digits, _ . -; default in files: the file name")
     description: str = Field("", max_length=DESCRIPTION_MAX)
+    robot: Literal["paper"] = Field("paper", description="the paper's planar robot (other robots: "
+                                    "uvms_mj.robot_scenario.RobotScenario)")
     duration: float = Field(40.0, gt=0, le=DURATION_MAX, description="simulated time [s]")
     seed: int = Field(0, ge=0, le=SEED_MAX, description="random seed of the sensor noise")
     physics: Physics = Field(default_factory=Physics)
@@ -618,9 +620,9 @@ class Scenario(_Section):
 
 # --------------------------------------------------------------------------- validation, loading
 
-def _model_at(loc: Sequence) -> type[BaseModel] | None:
+def _model_at(loc: Sequence, root: type[BaseModel] | None = None) -> type[BaseModel] | None:
     """The section model at a location (for the allowed keys of an unknown-key error)."""
-    model: Any = Scenario
+    model: Any = root or Scenario
     for part in loc:
         if not (isinstance(model, type) and issubclass(model, BaseModel)):
             return None
@@ -631,7 +633,7 @@ def _model_at(loc: Sequence) -> type[BaseModel] | None:
     return model if isinstance(model, type) and issubclass(model, BaseModel) else None
 
 
-def _format(exc: ValidationError, source: str) -> str:
+def _format(exc: ValidationError, source: str, root: type[BaseModel] | None = None) -> str:
     lines = []
     for err in exc.errors():
         loc = tuple(err["loc"])
@@ -642,7 +644,7 @@ def _format(exc: ValidationError, source: str) -> str:
                 lines.append(f"{source}: {_fmt_path(loc + tuple(sub))}: {msg}{got}")
             continue
         if err["type"] == "extra_forbidden":
-            model = _model_at(loc[:-1])
+            model = _model_at(loc[:-1], root)
             allowed = list(model.model_fields) if model else []
             lines.append(f"{source}: {_fmt_path(loc)}: unknown key {loc[-1]!r}{_suggest(loc[-1], allowed)}; allowed: "
                          + ", ".join(allowed))
@@ -652,12 +654,31 @@ def _format(exc: ValidationError, source: str) -> str:
     return "\n".join(lines)
 
 
-def validate_scenario(data: Any, source: str = "<scenario>") -> Scenario:
-    """Validate a raw mapping; raise :class:`ScenarioError` naming ``source`` on any problem."""
+def is_robot_scenario(scenario: Any) -> bool:
+    """Whether a validated scenario is for a floating robot (``robot`` other than "paper")."""
+    return type(scenario).__name__ == "RobotScenario"
+
+
+def validate_scenario(data: Any, source: str = "<scenario>", base_dir: str | Path | None = None):
+    """Validate a raw mapping; raise :class:`ScenarioError` naming ``source`` on any problem.
+
+    A mapping whose ``robot`` is absent or "paper" is a paper scenario (:class:`Scenario`);
+    any other robot (a built-in name or an MJCF path, relative to ``base_dir``) gives a
+    :class:`uvms_mj.robot_scenario.RobotScenario`."""
     if data is None:
         data = {}
     if not isinstance(data, dict):
         raise ScenarioError(f"{source}: a scenario must be a mapping of keys to values, got {_fmt_value(data)}")
+    robot = data.get("robot", "paper")
+    if robot != "paper":
+        from .robot_scenario import RobotScenario
+
+        if "base_dir" in data:
+            raise ScenarioError(f"{source}: base_dir: unknown key 'base_dir' (set by the loader)")
+        try:
+            return RobotScenario.model_validate({**data, "base_dir": None if base_dir is None else str(base_dir)})
+        except ValidationError as exc:
+            raise ScenarioError(_format(exc, source, RobotScenario)) from None
     try:
         return Scenario.model_validate(data)
     except ValidationError as exc:
@@ -833,7 +854,7 @@ def load_scenario(path: str | Path, sets: Sequence[str] = ()) -> Scenario:
         source = f"{source} (with --set {' '.join(sets)})"
     if "name" not in raw:
         raw = {"name": re.sub(r"[^A-Za-z0-9_.-]", "_", p.stem) or "scenario", **raw}
-    return validate_scenario(raw, source)
+    return validate_scenario(raw, source, base_dir=p.parent)
 
 
 def dump_yaml(scenario: Scenario) -> str:
@@ -846,6 +867,10 @@ def dump_yaml(scenario: Scenario) -> str:
 
 def controller_period(scenario: Scenario) -> float:
     """The controller period T [s]: controller.params.T, else the controller's default."""
+    if is_robot_scenario(scenario):
+        from . import robot_scenario
+
+        return robot_scenario.controller_period(scenario)
     params = scenario.controller.params
     if "T" in params:
         return float(params["T"])
@@ -917,6 +942,10 @@ def resolved(scenario: Scenario) -> dict:
     """The fully resolved scenario, JSON-serialisable (for log metadata): every default filled
     in, the drag model and log path resolved, the controller's parameters completed with the
     controller's own defaults. It is itself a valid scenario describing the same run."""
+    if is_robot_scenario(scenario):
+        from . import robot_scenario
+
+        return robot_scenario.resolved(scenario)
     d = scenario.model_dump(mode="json")
     d["plant"]["hydro"]["drag"] = drag_model(scenario)
     d["outputs"]["log"] = log_path(scenario).as_posix()
@@ -936,6 +965,10 @@ def build(scenario: Scenario) -> tuple[Plant, Any]:
         ScenarioError: a combination that only fails when built (e.g. overrides that conflict
             with the truth differences); the message names the scenario.
     """
+    if is_robot_scenario(scenario):
+        from . import robot_scenario
+
+        return robot_scenario.build(scenario)
     try:
         ph, pl, th = scenario.physics, scenario.plant, scenario.thrusters
         plant = Plant(
@@ -1019,6 +1052,10 @@ def run_scenario(
     """Build and run a scenario (:func:`uvms_mj.loop.run_closed_loop`). ``result.meta`` gains
     ``scenario`` (:func:`resolved`), ``name`` and ``backend``. ``built``: the (plant,
     controller) of :func:`build` if the caller built them already (fresh, never run)."""
+    if is_robot_scenario(scenario):
+        from . import robot_scenario
+
+        return robot_scenario.run(scenario, sink=sink, on_sample=on_sample, built=built)
     plant, ctrl = built if built is not None else build(scenario)
     sensor = sensor_model(scenario)
     T = float(getattr(ctrl, "T", controller_period(scenario)))

@@ -1,0 +1,415 @@
+"""Scenario files for any floating robot (``robot:`` other than ``paper``).
+
+A scenario whose ``robot`` field names a built-in robot other than the paper's
+(:data:`uvms_mj.robot.BUILTIN_ROBOTS`) or an MJCF file is validated by :class:`RobotScenario`
+and runs on :class:`uvms_mj.robot.RobotPlant`. Every section rejects unknown keys and names the
+field, the value and what is allowed; element names (bodies, joints, actuators, keyframes) are
+checked against the model with did-you-mean suggestions. Units SI unless the field says
+otherwise; world frame z up.
+
+.. code-block:: yaml
+
+    name: station_arm_sweep
+    robot: bluerov2_alpha        # built-in name or MJCF path (relative: to the scenario file)
+    tip_site: null               # end-effector site; null: the first site named *tip
+    duration: 20.0               # [s]
+    seed: 0
+    physics:
+      timestep: null             # [s]; null: the model's (2 ms for the BlueROV2 models)
+      integrator: null           # euler | rk4 | implicit | implicitfast; null: the model's
+      backend: auto
+    plant:                       # the truth
+      overrides: {}              # "<element>.<field>": value, e.g. {bluerov2.mass: 13.7}
+      hydro: {added_mass: exact, drag: strip, buoyancy: true}   # added_mass exact|off, drag strip|off
+      gravity: true
+      current: null              # world [vx, vy, vz] m/s; null: the model's
+    nominal:                     # the controller's model: the robot FILE plus these, never the plant
+      overrides: {}
+      gravity: true
+    initial:                     # every field optional (null: the model's qpos0 / keyframe)
+      keyframe: null             # a model keyframe to start from
+      position: [0, 0, -1]       # vehicle origin, world [m]
+      orientation:               # give quat OR rpy, not both
+        quat: null               # [w, x, y, z] (normalised)
+        rpy: [0, 0, 0]           # roll, pitch, yaw (z-y-x: R = Rz(yaw) Ry(pitch) Rx(roll))
+      joints: {alpha_shoulder: 90}   # joint name -> angle
+      angle_unit: deg            # deg | rad: the unit of rpy, joints and joint_velocities
+      linear_velocity: [0, 0, 0]     # world [m/s]
+      angular_velocity: [0, 0, 0]    # BODY frame [rad/s] (MuJoCo's free joint)
+      joint_velocities: {}       # joint name -> rate [angle_unit/s]
+    arm:                         # desired arm motion (min-jerk segments, at rest at each waypoint)
+      angle_unit: deg
+      waypoints:
+        - {t: 3.0, joints: {alpha_base: 60, alpha_shoulder: 120}}
+        - {t: 8.0, joints: {alpha_base: -60}}
+    sensors: {...}               # as the paper scenario (position, attitude, joint noise...)
+    controller:
+      name: station_pid          # a controller for floating robots
+      params: {}
+    warm_start: true
+    outputs: {...}               # as the paper scenario
+
+The controller is created as ``create(name, robot=NominalRobot(...), arm_trajectory=...,
+**params)``; a controller works on these scenarios when its class says ``robots = "floating"``.
+"""
+
+from __future__ import annotations
+
+import inspect
+import math
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from pydantic import Field, field_validator, model_validator
+
+from .controllers import ControllerError, available, create
+from .hydro import HydroTerms
+from .loop import RunResult, run_closed_loop
+from .nominal_robot import JointTrajectory, NominalRobot
+from .params import ParameterError
+from .robot import InitialState, Layout, RobotPlant, compile_robot_spec, quat_from_rpy, robot_path
+
+#: Bounds (as the paper scenario's).
+POSITION_MAX = 1000.0  # [m] |initial.position|
+VELOCITY_MAX = 10.0  # [m/s], [rad/s] initial velocities
+CURRENT_MAX = 10.0  # [m/s]
+
+
+from . import scenario as _S  # noqa: E402  (the shared sections and helpers)
+
+_Section = _S._Section
+_Issues = _S._Issues
+_NO_VALUE = _S._NO_VALUE
+_suggest = _S._suggest
+
+Vec3 = Annotated[list[Annotated[float, Field(ge=-POSITION_MAX, le=POSITION_MAX)]], Field(min_length=3, max_length=3)]
+Vel3 = Annotated[list[Annotated[float, Field(ge=-VELOCITY_MAX, le=VELOCITY_MAX)]], Field(min_length=3, max_length=3)]
+
+
+def _model_of(robot: str, base_dir: str | None):
+    """(path, compiled model file without overrides, layout) for validation (cached by path)."""
+    path = robot_path(robot, base_dir)
+    return path, _compiled(str(path))
+
+
+_CACHE: dict[str, Any] = {}
+
+
+def _compiled(path: str):
+    if path not in _CACHE:
+        m = compile_robot_spec(path)
+        _CACHE[path] = (m, Layout.of(m))
+    return _CACHE[path]
+
+
+class Orientation(_Section):
+    """The vehicle's initial orientation: a quaternion or roll/pitch/yaw (not both)."""
+
+    quat: Annotated[list[float], Field(min_length=4, max_length=4)] | None = Field(
+        None, description="[w, x, y, z], normalised")
+    rpy: Annotated[list[Annotated[float, Field(ge=-720, le=720)]], Field(min_length=3, max_length=3)] | None = Field(
+        None, description="roll, pitch, yaw in initial.angle_unit (z-y-x convention)")
+
+    @model_validator(mode="after")
+    def _one(self) -> "Orientation":
+        if self.quat is not None and self.rpy is not None:
+            raise _Issues([((), "give either quat or rpy, not both", {"quat": self.quat, "rpy": self.rpy})])
+        if self.quat is not None and float(np.linalg.norm(self.quat)) < 1e-9:
+            raise _Issues([(("quat",), "must not be zero", self.quat)])
+        return self
+
+
+class Initial(_Section):
+    """The initial state (every field optional)."""
+
+    keyframe: str | None = Field(None, description="a model keyframe to start from")
+    position: Vec3 | None = Field(None, description="vehicle origin, world [m]")
+    orientation: Orientation | None = None
+    joints: dict[str, float] = Field(default_factory=dict, description="joint name -> angle [angle_unit]")
+    angle_unit: Literal["deg", "rad"] = Field("deg", description="unit of rpy, joints and joint_velocities")
+    linear_velocity: Vel3 | None = Field(None, description="world [m/s]")
+    angular_velocity: Vel3 | None = Field(None, description="body frame [rad/s]")
+    joint_velocities: dict[str, float] = Field(default_factory=dict, description="joint name -> [angle_unit/s]")
+
+    def state(self) -> InitialState:
+        """As :class:`uvms_mj.robot.InitialState` (radians)."""
+        k = math.pi / 180.0 if self.angle_unit == "deg" else 1.0
+        quat = None
+        if self.orientation is not None:
+            if self.orientation.quat is not None:
+                quat = tuple(self.orientation.quat)
+            elif self.orientation.rpy is not None:
+                quat = tuple(quat_from_rpy(*(k * v for v in self.orientation.rpy)))
+        return InitialState(
+            position=tuple(self.position) if self.position is not None else None, quat=quat,
+            joints={n: k * v for n, v in self.joints.items()},
+            linear_velocity=tuple(self.linear_velocity) if self.linear_velocity is not None else None,
+            angular_velocity=tuple(self.angular_velocity) if self.angular_velocity is not None else None,
+            joint_velocities={n: k * v for n, v in self.joint_velocities.items()},
+            keyframe=self.keyframe)
+
+
+class Waypoint(_Section):
+    t: float = Field(gt=0, le=_S.DURATION_MAX, description="[s]")
+    joints: dict[str, float] = Field(description="joint name -> angle [arm.angle_unit]")
+
+
+class Arm(_Section):
+    """Desired arm motion: timed waypoints, minimum-jerk between them."""
+
+    angle_unit: Literal["deg", "rad"] = "deg"
+    waypoints: list[Waypoint] = Field(default_factory=list)
+
+    @model_validator(mode="after")
+    def _increasing(self) -> "Arm":
+        last = 0.0
+        for i, w in enumerate(self.waypoints):
+            if not w.t > last:
+                raise _Issues([(("waypoints", i, "t"), f"times must be strictly increasing (previous {last:g} s)", w.t)])
+            last = w.t
+        return self
+
+
+class RobotHydro(_Section):
+    added_mass: Literal["exact", "off"] = "exact"
+    drag: Literal["strip", "off"] = "strip"
+    buoyancy: bool = True
+
+
+class RobotPlantSection(_Section):
+    overrides: dict[str, Any] = Field(default_factory=dict, description="'<element>.<field>': value")
+    hydro: RobotHydro = Field(default_factory=RobotHydro)
+    gravity: bool = True
+    current: Annotated[list[Annotated[float, Field(ge=-CURRENT_MAX, le=CURRENT_MAX)]],
+                       Field(min_length=3, max_length=3)] | None = Field(None, description="world [vx, vy, vz] m/s")
+
+
+class RobotNominalSection(_Section):
+    overrides: dict[str, Any] = Field(default_factory=dict)
+    gravity: bool = True
+
+
+class RobotPhysics(_Section):
+    timestep: float | None = Field(None, ge=_S.TIMESTEP_RANGE[0], le=_S.TIMESTEP_RANGE[1])
+    integrator: Literal["euler", "rk4", "implicit", "implicitfast"] | None = None
+    backend: Literal["auto", "native", "python"] = "auto"
+
+
+class RobotController(_Section):
+    name: str = Field("station_pid", description="a controller for floating robots")
+    params: dict[str, Any] = Field(default_factory=dict)
+
+
+def floating_controllers() -> list[str]:
+    """Registered controllers that work on floating-robot scenarios (``robots = "floating"``)."""
+    out = []
+    for n in available():
+        try:
+            f = _S._factory(n)
+        except Exception:  # noqa: BLE001 - a broken plug-in is not offered
+            continue
+        if getattr(f, "robots", "paper") in ("floating", "any"):
+            out.append(n)
+    return out
+
+
+class RobotScenario(_Section):
+    """A scenario for a floating robot (module docstring)."""
+
+    name: str = Field("scenario", pattern=r"^[A-Za-z0-9][A-Za-z0-9_.-]*$", max_length=_S.NAME_MAX)
+    description: str = Field("", max_length=_S.DESCRIPTION_MAX)
+    robot: str = Field(min_length=1, max_length=4096, description="built-in robot or MJCF path")
+    base_dir: str | None = Field(None, exclude=True, description="(set by the loader) the scenario file's folder")
+    tip_site: str | None = None
+    duration: float = Field(20.0, gt=0, le=_S.DURATION_MAX)
+    seed: int = Field(0, ge=0, le=_S.SEED_MAX)
+    physics: RobotPhysics = Field(default_factory=RobotPhysics)
+    plant: RobotPlantSection = Field(default_factory=RobotPlantSection)
+    nominal: RobotNominalSection = Field(default_factory=RobotNominalSection)
+    initial: Initial = Field(default_factory=Initial)
+    arm: Arm = Field(default_factory=Arm)
+    sensors: _S.Sensors = Field(default_factory=_S.Sensors)
+    controller: RobotController = Field(default_factory=RobotController)
+    warm_start: bool = True
+    outputs: _S.Outputs = Field(default_factory=_S.Outputs)
+
+    @field_validator("robot")
+    @classmethod
+    def _robot(cls, v: str) -> str:
+        if v == "paper":
+            raise ValueError("robot 'paper' uses the paper scenario schema")
+        return v
+
+    @model_validator(mode="after")
+    def _check_model(self) -> "RobotScenario":
+        try:
+            path, (m, lay) = _model_of(self.robot, self.base_dir)
+        except ParameterError as exc:
+            raise _Issues([(("robot",), str(exc).split(": ", 1)[-1], self.robot)]) from None
+        issues: list = []
+        # overrides, by element name (each applied alone to find the culprit)
+        for sec in ("plant", "nominal"):
+            for key, value in getattr(self, sec).overrides.items():
+                try:
+                    compile_robot_spec(path, {key: value})
+                except ParameterError as exc:
+                    msg = str(exc)
+                    msg = msg.split(": ", 1)[1] if msg.startswith("override ") and ": " in msg else msg
+                    issues.append(((sec, "overrides", key), msg, value))
+        if self.tip_site is not None:
+            try:
+                Layout.of(m, self.tip_site)
+            except ParameterError as exc:
+                issues.append((("tip_site",), str(exc), _NO_VALUE))
+        try:
+            import mujoco
+
+            st = self.initial.state()
+            st.apply(m, mujoco.MjData(m), lay)
+        except ParameterError as exc:
+            issues.append((("initial",), str(exc).removeprefix("initial."), _NO_VALUE))
+        names = list(lay.joint_names)
+        for i, w in enumerate(self.arm.waypoints):
+            for jn in w.joints:
+                if jn not in names:
+                    issues.append((("arm", "waypoints", i, "joints", jn),
+                                   f"not a joint of {self.robot}{_suggest(jn, names)}; joints: {', '.join(names) or 'none'}",
+                                   _NO_VALUE))
+        if self.arm.waypoints and not names:
+            issues.append((("arm",), f"robot {self.robot!r} has no arm joints", _NO_VALUE))
+        # controller: registered, for floating robots, its parameters valid
+        c = self.controller
+        allowed = floating_controllers()
+        if c.name not in available():
+            issues.append((("controller", "name"), f"unknown controller{_suggest(c.name, available())}; for "
+                           f"floating robots: {', '.join(allowed)}", c.name))
+        elif c.name not in allowed:
+            issues.append((("controller", "name"), f"works on the paper robot only; for floating robots: "
+                           f"{', '.join(allowed)}", c.name))
+        else:
+            found = _check_params(c.name, c.params)
+            for sub, msg, value in found:
+                issues.append((("controller", "params") + sub, msg, value))
+            if not found and not issues:
+                issues += _try_create(c.name, c.params, path)
+        if not issues:
+            dt = self.physics.timestep or float(m.opt.timestep)
+            T = controller_period(self)
+            sub = T / dt
+            if abs(sub - round(sub)) > 1e-9 or round(sub) < 1:
+                issues.append((("controller", "params", "T"), f"the controller period must be a whole multiple of "
+                               f"the timestep {dt!r} s", T))
+        if issues:
+            raise _Issues(issues)
+        return self
+
+
+def _check_params(name: str, params: dict) -> list:
+    named, var_kw = _S._controller_signature(name)
+    named.pop("robot", None)
+    named.pop("arm_trajectory", None)
+    issues = []
+    for key, value in params.items():
+        if not var_kw and key not in named:
+            issues.append(((key,), f"{key!r} is not a parameter of controller {name!r}{_suggest(key, named)}; "
+                           "allowed: " + ", ".join(named), _NO_VALUE))
+        elif _S._non_finite(value):
+            issues.append(((key,), "must be finite", value))
+    return issues
+
+
+def _try_create(name: str, params: dict, path: Path) -> list:
+    """The controller's own parameter errors, each attributed to the parameter that causes it."""
+    nominal = _nominal_for(str(path))
+
+    def attempt(kw: dict) -> str | None:
+        try:
+            create(name, robot=nominal, arm_trajectory=None, **kw)
+        except (ControllerError, ValueError, TypeError) as exc:
+            return str(exc)
+        return None
+
+    err = attempt(params)
+    if err is None:
+        return []
+    out = [(("controller", "params", k), e, v) for k, v in params.items() if (e := attempt({k: v})) is not None]
+    return out or [(("controller", "params"), err, params)]
+
+
+_NOMINAL: dict[str, NominalRobot] = {}
+
+
+def _nominal_for(path: str) -> NominalRobot:
+    if path not in _NOMINAL:
+        _NOMINAL[path] = NominalRobot(path)
+    return _NOMINAL[path]
+
+
+def controller_period(sc: RobotScenario) -> float:
+    """controller.params.T, else the controller's default T."""
+    if "T" in sc.controller.params:
+        return float(sc.controller.params["T"])
+    named, _ = _S._controller_signature(sc.controller.name)
+    p = named.get("T")
+    if p is not None and p.default is not inspect.Parameter.empty:
+        return float(p.default)
+    from .controllers.station_pid import DEFAULT_T
+
+    return DEFAULT_T
+
+
+def robot_info(sc: RobotScenario, plant: RobotPlant | None = None) -> dict:
+    """The run's robot for logs: {name, path, overrides, layout}."""
+    path = robot_path(sc.robot, sc.base_dir)
+    lay = plant.layout if plant is not None else _compiled(str(path))[1]
+    return {"name": sc.robot, "path": str(path), "overrides": _S._jsonable(sc.plant.overrides),
+            "layout": lay.describe()}
+
+
+def resolved(sc: RobotScenario) -> dict:
+    """The resolved scenario (JSON-able, for log metadata): defaults filled, the robot's path."""
+    d = sc.model_dump(mode="json")
+    d["robot_path"] = str(robot_path(sc.robot, sc.base_dir))
+    d["outputs"]["log"] = _S.log_path(sc).as_posix()
+    d["controller"]["params"]["T"] = controller_period(sc)
+    return _S._jsonable(d)
+
+
+def build(sc: RobotScenario) -> tuple[RobotPlant, Any]:
+    """The plant (truth) and the controller.
+
+    Raises:
+        uvms_mj.scenario.ScenarioError: a combination that fails only when built.
+    """
+    try:
+        ph, pl = sc.physics, sc.plant
+        plant = RobotPlant(
+            robot_path(sc.robot, sc.base_dir), overrides=pl.overrides,
+            terms=HydroTerms(added_mass=pl.hydro.added_mass, drag=pl.hydro.drag, buoyancy=pl.hydro.buoyancy),
+            gravity=pl.gravity, current=pl.current, timestep=ph.timestep, integrator=ph.integrator,
+            initial=sc.initial.state(), tip_site=sc.tip_site, backend=None if ph.backend == "auto" else ph.backend)
+        nominal = NominalRobot(robot_path(sc.robot, sc.base_dir), sc.nominal.overrides, gravity=sc.nominal.gravity,
+                               tip_site=sc.tip_site)
+        arm = None
+        names = plant.layout.joint_names
+        if names:
+            k = math.pi / 180.0 if sc.arm.angle_unit == "deg" else 1.0
+            arm = JointTrajectory.from_waypoints(names, plant.joint_angles,
+                                                 [(w.t, {n: k * v for n, v in w.joints.items()})
+                                                  for w in sc.arm.waypoints])
+        ctrl = create(sc.controller.name, robot=nominal, arm_trajectory=arm, **sc.controller.params)
+    except (ParameterError, ControllerError, ValueError, TypeError) as exc:
+        raise _S.ScenarioError(f"scenario {sc.name!r}: {exc}") from None
+    return plant, ctrl
+
+
+def run(sc: RobotScenario, sink=None, on_sample=None, built: tuple | None = None) -> RunResult:
+    """Build and run (:func:`uvms_mj.loop.run_closed_loop`); ``meta`` gains ``scenario``,
+    ``name``, ``backend`` and ``robot``."""
+    plant, ctrl = built if built is not None else build(sc)
+    T = float(getattr(ctrl, "T", controller_period(sc)))
+    res = run_closed_loop(plant, ctrl, sc.duration, T=T, sensor=_S.sensor_model(sc), seed=sc.seed,
+                          warm_start=sc.warm_start, on_sample=on_sample, sink=sink)
+    res.meta.update(name=sc.name, backend=plant.backend, scenario=resolved(sc), robot=robot_info(sc, plant))
+    return res
