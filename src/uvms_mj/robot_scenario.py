@@ -368,9 +368,9 @@ def robot_info(sc: RobotScenario, plant: RobotPlant | None = None) -> dict:
 
 
 def resolved(sc: RobotScenario) -> dict:
-    """The resolved scenario (JSON-able, for log metadata): defaults filled, the robot's path."""
+    """The resolved scenario (JSON-able, for log metadata): defaults filled in (the robot's file
+    is in :func:`robot_info`). It is itself a valid scenario describing the same run."""
     d = sc.model_dump(mode="json")
-    d["robot_path"] = str(robot_path(sc.robot, sc.base_dir))
     d["outputs"]["log"] = _S.log_path(sc).as_posix()
     d["controller"]["params"]["T"] = controller_period(sc)
     return _S._jsonable(d)

@@ -645,7 +645,7 @@ def _format(exc: ValidationError, source: str, root: type[BaseModel] | None = No
             continue
         if err["type"] == "extra_forbidden":
             model = _model_at(loc[:-1], root)
-            allowed = list(model.model_fields) if model else []
+            allowed = [k for k, f in model.model_fields.items() if not f.exclude] if model else []
             lines.append(f"{source}: {_fmt_path(loc)}: unknown key {loc[-1]!r}{_suggest(loc[-1], allowed)}; allowed: "
                          + ", ".join(allowed))
             continue
@@ -675,6 +675,11 @@ def validate_scenario(data: Any, source: str = "<scenario>", base_dir: str | Pat
 
         if "base_dir" in data:
             raise ScenarioError(f"{source}: base_dir: unknown key 'base_dir' (set by the loader)")
+        from .robot import BUILTIN_ROBOTS
+
+        # The scenario file's folder matters only for a robot given as a relative path.
+        if base_dir is not None and (not isinstance(robot, str) or robot in BUILTIN_ROBOTS):
+            base_dir = None
         try:
             return RobotScenario.model_validate({**data, "base_dir": None if base_dir is None else str(base_dir)})
         except ValidationError as exc:
