@@ -18,7 +18,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Mapping, Sequence
+from typing import Any, Callable, Mapping, Sequence
 
 import mujoco
 import numpy as np
@@ -42,18 +42,20 @@ class NominalRobot:
     """
 
     def __init__(self, robot: str | Path, overrides: Mapping[str, Any] | None = None, gravity: bool = True,
-                 tip_site: str | None = None) -> None:
+                 tip_site: str | None = None, edit: Callable[[mujoco.MjSpec], None] | None = None) -> None:
         self.path = robot_path(robot)
 
-        def edit(spec: mujoco.MjSpec) -> None:
+        def _edit(spec: mujoco.MjSpec) -> None:
+            if edit is not None:
+                edit(spec)
             # No knowledge of the water's motion: a constant zero current.
             _pm.set_water(spec, current="0 0 0", current_model="constant")
             if not gravity:
                 spec.option.gravity = [0.0, 0.0, 0.0]
 
-        self.model = compile_robot_spec(self.path, overrides, edit=edit)
+        self.model = compile_robot_spec(self.path, overrides, edit=_edit)
         self.data = mujoco.MjData(self.model)
-        self.layout = Layout.of(self.model, tip_site)
+        self.layout = Layout.of(self.model, tip_site, allow_planar=True)
         if not _pm.hydro_of(self.model).native:
             # Stripped plugins (no C compiler): serve the reference hydrodynamics on this MjData.
             from .physics import python_backend as _pyb
@@ -73,6 +75,34 @@ class NominalRobot:
         d.qvel[:] = 0.0 if qd is None else qd
         d.time = 0.0
         mujoco.mj_forward(self.model, d)
+
+    def dynamics(self, q: Sequence[float], qd: Sequence[float]) -> tuple[np.ndarray, np.ndarray]:
+        """(M, h) at the measured state: the full mass matrix (``mj_fullM``, added mass
+        included) and h = ``qfrc_bias - qfrc_passive`` (Coriolis and centrifugal, added-mass
+        velocity terms, drag, damping, gravity minus buoyancy), so that the generalized force
+        giving q_ddot is M q_ddot + h (Eq. 7 of the paper on its nominal model). One
+        ``mj_forward`` of the controller's own MjData."""
+        self._set(np.asarray(q, dtype=float), np.asarray(qd, dtype=float))
+        M = np.zeros((self.model.nv, self.model.nv))
+        mujoco.mj_fullM(self.model, self.data, M)
+        return M, self.data.qfrc_bias - self.data.qfrc_passive
+
+    def jacobians(self) -> dict[str, np.ndarray]:
+        """Jacobians at the state of the last :meth:`dynamics` / :meth:`hold_force` call
+        (``mj_jacBody`` at the vehicle's origin, ``mj_jacSite`` at the tip; rows world axes):
+        ``base_p``, ``base_r``, ``tip_p``, ``tip_r`` (3 x nv each), and the vehicle's and tip's
+        world rotation matrices ``R_base``, ``R_tip`` and tip position ``tip``."""
+        m, d, lay = self.model, self.data, self.layout
+        nv = m.nv
+        out = {k: np.zeros((3, nv)) for k in ("base_p", "base_r", "tip_p", "tip_r")}
+        mujoco.mj_jacBody(m, d, out["base_p"], out["base_r"], lay.base_body)
+        if lay.tip_site >= 0:
+            mujoco.mj_jacSite(m, d, out["tip_p"], out["tip_r"], lay.tip_site)
+            out["R_tip"] = d.site_xmat[lay.tip_site].reshape(3, 3).copy()
+            out["tip"] = d.site_xpos[lay.tip_site].copy()
+        out["R_base"] = d.xmat[lay.base_body].reshape(3, 3).copy()
+        out["base"] = d.xpos[lay.base_body].copy()
+        return out
 
     def hold_force(self, q: Sequence[float]) -> np.ndarray:
         """Generalized force (nv) that holds the robot at rest at ``q``: gravity minus buoyancy

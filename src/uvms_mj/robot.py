@@ -147,8 +147,11 @@ class Layout:
     """The named pieces of a compiled robot model (ids and addresses into MuJoCo's arrays).
 
     Attributes:
-        base_body, base_name: the vehicle: the body carrying the free joint.
-        base_qadr, base_dadr: its free joint's ``qpos`` (7) and ``qvel`` (6) addresses.
+        base_body, base_name: the vehicle: the body carrying the free joint (or, for a planar
+            model, the base joints).
+        base_qadr, base_dadr: its free joint's ``qpos`` (7) and ``qvel`` (6) addresses (first
+            addresses for joint bases).
+        base_free: the vehicle is on a free joint; base_dofs: its dofs (6, or one per joint).
         joints: the other joints (hinge/slide), model order: names, ``qpos`` and ``qvel`` addresses.
         thrusters: thruster actuator names (site transmission, model order) and ids.
         motors: joint actuators: names, ids, and the joint each drives.
@@ -171,21 +174,36 @@ class Layout:
     tip_site: int
     tip_name: str
     body_names: tuple[str, ...] = field(default=())
+    base_free: bool = True
+    base_dofs: np.ndarray = field(default_factory=lambda: np.arange(6))
 
     @classmethod
-    def of(cls, m: mujoco.MjModel, tip_site: str | None = None) -> "Layout":
+    def of(cls, m: mujoco.MjModel, tip_site: str | None = None, allow_planar: bool = False) -> "Layout":
         """The layout of ``m``; ``tip_site``: the end-effector site (default: the first site
         whose name ends in "tip", or none).
 
+        The vehicle is the body carrying a free joint; without one (``allow_planar``), the first
+        child of the world that carries joints, with all its joints (slides and hinges, e.g. the
+        paper's planar base: slide x, slide y, hinge z).
+
         Raises:
-            ParameterError: no free joint (this plant needs a floating vehicle), more than one,
-                or an unknown ``tip_site``.
+            ParameterError: no free joint (and not ``allow_planar``), more than one, or an
+                unknown ``tip_site``.
         """
         free = [j for j in range(m.njnt) if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
-        if len(free) != 1:
+        if len(free) > 1 or (not free and not allow_planar):
             raise ParameterError(f"the robot model must have exactly one free joint (the vehicle), it has {len(free)}")
-        jf = free[0]
-        others = [j for j in range(m.njnt) if j != jf]
+        if free:
+            base_joints = [free[0]]
+        else:
+            roots = [b for b in range(1, m.nbody) if m.body_parentid[b] == 0 and m.body_jntnum[b] > 0]
+            if not roots:
+                raise ParameterError("the robot model has no vehicle: no body on a free joint nor a child of the "
+                                     "world with joints")
+            b0 = roots[0]
+            base_joints = list(range(m.body_jntadr[b0], m.body_jntadr[b0] + m.body_jntnum[b0]))
+        jf = base_joints[0]
+        others = [j for j in range(m.njnt) if j not in base_joints]
         for j in others:
             if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_BALL:
                 raise ParameterError(f"joint {_name(m, mujoco.mjtObj.mjOBJ_JOINT, j)!r}: ball joints are not "
@@ -205,7 +223,10 @@ class Layout:
                 raise ParameterError(f"tip_site = {tip_site!r}: no site of that name{hint}")
         J = mujoco.mjtObj.mjOBJ_JOINT
         A = mujoco.mjtObj.mjOBJ_ACTUATOR
+        base_dofs = [int(m.jnt_dofadr[j]) + i for j in base_joints
+                     for i in range(6 if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE else 1)]
         return cls(
+            base_free=bool(free), base_dofs=np.array(base_dofs, dtype=int),
             base_body=int(m.jnt_bodyid[jf]), base_name=_name(m, mujoco.mjtObj.mjOBJ_BODY, int(m.jnt_bodyid[jf])),
             base_qadr=int(m.jnt_qposadr[jf]), base_dadr=int(m.jnt_dofadr[jf]),
             joint_names=tuple(_name(m, J, j) for j in others),

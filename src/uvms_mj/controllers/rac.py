@@ -1,0 +1,520 @@
+"""``rac`` and ``rac_dob``: the paper's digital RAC and disturbance observer for any robot.
+
+One implementation for the paper's planar robot and for any floating vehicle with an arm
+(``robots = "floating"``). Its nominal model is its own MuJoCo model
+(:class:`uvms_mj.nominal_robot.NominalRobot`: the robot FILE with nominal parameters, still
+water, never the plant), evaluated at the measured state with MuJoCo's functions: ``mj_fullM``
+and ``qfrc_bias - qfrc_passive`` for Eqs. 6, 7 and 13, ``mj_jacBody`` / ``mj_jacSite`` for the
+task Jacobian. The planar closed form (:mod:`uvms_mj.nominal`, controllers ``rac_planar`` and
+``rac_dob_planar``) stays only as the test oracle: on the paper's robot both give the same run.
+
+Task (the paper's p = (x0, pe), Eq. 1, generalised):
+
+* planar base (slides and a hinge, the paper): p = (base joint coordinates, tip position along
+  the base's slide axes); the base rows of J are the identity on the base dofs;
+* floating base (free joint): p = (vehicle origin position [world], vehicle orientation, tip
+  position [world] and, with ``tip_orientation``, tip orientation). Orientation errors are
+  rotation vectors in WORLD axes, e = log(R_d R^T) (so e is the rotation taking the measured
+  attitude to the desired one, and p_dot = omega in world axes): exact for any error angle below
+  pi, equal to the paper's angle difference in the plane. The base rows of J map qvel (linear
+  world, angular body) to (v, R omega).
+
+Digital RAC (Eqs. 10-11), J_dot by backward difference (Eq. 9), then (block form of Eq. 9)
+
+    q_ddot_B = S_B^-1 rhs_B                       (S_B: the base rows on the base dofs)
+    q_ddot_M = B# (rhs_T - J_TB q_ddot_B) + (I - B# B) q_ddot_0,    rhs = a_d - J_dot q_dot
+
+with B = J_TM the arm Jacobian (tip rows, arm dofs). Square B (the paper): B# = B^-1, or damped
+least squares below ``dls_threshold`` of the manipulability. Redundant arm (more joints than tip
+rows): the weighted pseudo-inverse B# = W^-1 B^T (B W^-1 B^T + mu^2 I)^-1 with W = the nominal
+arm inertia M_MM (dynamically consistent; the null-space motion does not load the task), and a
+null-space posture term q_ddot_0 = k_null (q_rest - q) - d_null q_dot on the arm joints,
+q_rest the initial angles. Eq. 12 moves the base's desired position while the manipulability
+sqrt(det(B B^T)) (= |det B| for the paper's square B) is below ``js``. Inputs (Eqs. 13-15)
+by computed torque on the nominal model; the observer (Eqs. 14-15 corrected, Fig. 3(b)) acts on
+the base's generalized force (planar: world fx, fy, tau0; free joint: world force, body
+moment: MuJoCo's free-joint dofs). The base force goes to the thrusters as a body-frame wrench
+(``allocation``: "clip" -- least squares then clipped to the limits, the paper code's -- or
+"wls", :class:`uvms_mj.thrusters.Allocator`, weighted least squares with redistribution; "auto":
+clip for a square allocation, wls otherwise).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Callable
+
+import mujoco
+import numpy as np
+
+from ..nominal_robot import NominalRobot
+from ..thrusters import Allocator
+from .base import Command, Controller, ControllerError, Measurement, check_positive, register
+from .builtin import PAPER_JS, PAPER_T, PAPER_TF, LowPassZOH
+from .station_pid import quat_to_mat, rotation_log
+
+#: Default gains per task block (the paper's Gamma = Lambda = diag(0.3, 0.3, 0.2, 0.2, 0.2) on
+#: its planar task: 0.3 for the base position, 0.2 for the base rotation and the tip).
+GAIN_BASE_POSITION, GAIN_BASE_ROTATION, GAIN_TIP = 0.3, 0.2, 0.2
+
+
+def _rot_from_rotvec(v: np.ndarray) -> np.ndarray:
+    a = float(np.linalg.norm(v))
+    if a < 1e-300:
+        return np.eye(3)
+    k = v / a
+    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
+    return np.eye(3) + math.sin(a) * K + (1 - math.cos(a)) * (K @ K)
+
+
+def _mat_to_quat(R: np.ndarray) -> np.ndarray:
+    q = np.zeros(4)
+    mujoco.mju_mat2Quat(q, np.ascontiguousarray(R).ravel())
+    return q
+
+
+class _Singular:
+    """Eq. 12 (docs/paper-reading.md): the base carries the arm near a singular arm Jacobian.
+
+    As :class:`uvms_mj.controllers.builtin.SingularHandler`, on the manipulability and in any
+    number of base position axes; the velocity the base takes at k1 is the trajectory's cruise
+    velocity when it has one, else its desired tip velocity at k1 (``v_event(k)``)."""
+
+    def __init__(self, js_low: float, js_high: float, n: int, v_event: Callable[[int], np.ndarray], size: int):
+        self.js_low, self.js_high, self.n, self.v_event = js_low, js_high, n, v_event
+        self.phase, self.k_event = 0, 0
+        self.v_from = np.zeros(size)
+        self.v_to = np.zeros(size)
+        self.v = np.zeros(size)
+
+    def update(self, k: int, manip: float) -> np.ndarray:
+        a = abs(manip)
+        if self.phase != 1 and a < self.js_low:
+            self.phase, self.k_event, self.v_from, self.v_to = 1, k, self.v.copy(), np.asarray(self.v_event(k), float)
+        elif self.phase == 1 and a > self.js_high:
+            self.phase, self.k_event, self.v_from, self.v_to = 2, k, self.v.copy(), np.zeros_like(self.v)
+        frac = min(1.0, (k - self.k_event + 1) / self.n)
+        self.v = self.v_from + frac * (self.v_to - self.v_from)
+        if self.phase == 2 and frac >= 1.0:
+            self.phase = 0
+        return self.v
+
+
+def _gains(name: str, value: Any, default: np.ndarray) -> np.ndarray:
+    if value is None:
+        return default.copy()
+    arr = np.atleast_1d(np.asarray(value, dtype=float))
+    if arr.size == 1:
+        arr = np.full(default.size, float(arr[0]))
+    if arr.shape != default.shape:
+        raise ControllerError(f"{name} = {value!r} must be 1 or {default.size} numbers (the task size)")
+    for i, v in enumerate(arr):
+        if not (0.0 < v < 1.0):
+            raise ControllerError(f"{name}[{i}] = {float(v)!r} is outside the allowed range (0, 1)")
+    return arr
+
+
+def nominal_robot_from_params(nominal) -> NominalRobot:
+    """The paper robot's :class:`NominalRobot` for a planar :class:`uvms_mj.nominal.NominalModel`:
+    the model file with every parameter of ``nominal.params`` written back as overrides (so a
+    NominalModel built from edited parameters gives the same MuJoCo nominal model)."""
+    from ..params import apply_overrides
+    from ..plant import models_dir
+
+    p = nominal.params
+    over: dict[str, Any] = {"water_density": p.rho}
+    for b in p.bodies:
+        over.update({f"{b.name}.mass": b.mass, f"{b.name}.inertia": b.inertia,
+                     f"{b.name}.added_mass": [b.added_mass[0], b.added_mass[1], b.added_inertia],
+                     f"{b.name}.drag_coef": list(b.drag_coef), f"{b.name}.volume": b.volume,
+                     f"{b.name}.cob": list(b.cob)})
+    ranges = {tuple(t.force_range) for t in p.thrusters}
+    if len(ranges) == 1:
+        over["thrusters.force_range"] = list(ranges.pop())
+    gx, gy = nominal.gravity
+
+    def edit(spec: mujoco.MjSpec) -> None:
+        apply_overrides(spec, over)
+        spec.option.gravity = [float(gx), float(gy), 0.0]
+
+    robot = NominalRobot(models_dir() / "uvms.xml", edit=edit)
+    if len(ranges) > 1:  # per-thruster ranges
+        for t in p.thrusters:
+            a = mujoco.mj_name2id(robot.model, mujoco.mjtObj.mjOBJ_ACTUATOR, t.name)
+            robot.model.actuator_forcerange[a] = t.force_range
+        lay = robot.layout
+        robot.thruster_lo, robot.thruster_hi = robot.model.actuator_forcerange[lay.thruster_ids].T.copy()
+    return robot
+
+
+@register("rac")
+class RAC(Controller):
+    """Digital RAC (Eqs. 10-11) with Eq. 12 and computed torque on the nominal MuJoCo model
+    (Eqs. 13, 15; no observer), for any robot (module docstring).
+
+    Args:
+        trajectory: desired tip path: any object with ``position(t)`` (world [m]; a
+            :class:`uvms_mj.trajectory.StraightLine` or any :class:`uvms_mj.trajectories.Trajectory`),
+            ``velocity(t)`` if it has no ``cruise_velocity()``; ``orientation(t)`` with
+            ``tip_orientation``. None: hold the initial tip position.
+        robot: the controller's :class:`NominalRobot` (floating robots; given by the scenario).
+        nominal: for the paper's robot, a planar :class:`uvms_mj.nominal.NominalModel` whose
+            parameters make the nominal MuJoCo model (default: the model file's).
+        T: sampling period [s] (paper 1/60).
+        gamma, lam: Gamma, Lambda (1 or task-size numbers in (0, 1); default 0.3 base position,
+            0.2 base rotation and tip: the paper's on its robot).
+        js, js_high: Eq. 12 thresholds on the manipulability (paper 0.045; js_high default js).
+        n_ramp: samples of the Eq. 12 velocity ramps (ours: 30).
+        base_reference: base desired pose: planar (x, y, phi0); floating (x, y, z, qw, qx, qy,
+            qz); default the first measurement.
+        dls_threshold, dls_damping: damped least squares below this manipulability (ours 0.01).
+        allocation: "auto" | "clip" | "wls" (module docstring).
+        tf, observer_gain, observer_input: the observer (as the paper code's).
+        tip_orientation: also control the tip's orientation (floating robots; needs 6 arm dofs
+            for full rank, else the DLS/pseudo-inverse handles the deficiency).
+        null_kp, null_kd: null-space posture gains [1/s^2, 1/s] for a redundant arm.
+    """
+
+    observer = False
+    robots = "floating"
+
+    def __init__(
+        self,
+        trajectory=None,
+        robot: NominalRobot | None = None,
+        nominal=None,
+        T: float = PAPER_T,
+        gamma=None,
+        lam=None,
+        js: float = PAPER_JS,
+        js_high: float | None = None,
+        n_ramp: int = 30,
+        base_reference=None,
+        dls_threshold: float = 0.01,
+        dls_damping: float = 0.01,
+        allocation: str = "auto",
+        tf: float = PAPER_TF,
+        observer_gain: str = "1/Tf",
+        observer_input: str = "allocated",
+        tip_orientation: bool = False,
+        null_kp: float = 4.0,
+        null_kd: float = 4.0,
+        arm_trajectory=None,
+    ) -> None:
+        if robot is None:
+            from ..nominal import NominalModel
+
+            robot = nominal_robot_from_params(nominal if nominal is not None else NominalModel())
+        if not isinstance(robot, NominalRobot):
+            raise ControllerError(f"robot = {robot!r} must be a NominalRobot")
+        self.robot = robot
+        lay = robot.layout
+        if lay.tip_site < 0:
+            raise ControllerError("rac needs an end-effector site (the robot has no site named *tip; "
+                                  "set the scenario's tip_site)")
+        self.trajectory = trajectory
+        self.T = check_positive("T", T)
+        self.free = bool(lay.base_free)
+        self.tip_orientation = bool(tip_orientation)
+        if self.tip_orientation and not self.free:
+            raise ControllerError("tip_orientation applies to floating robots only")
+        m = robot.model
+        self.base_dofs = np.asarray(lay.base_dofs, dtype=int)
+        self.arm_dofs = np.array([d for d in range(m.nv) if d not in set(self.base_dofs)], dtype=int)
+        nb = self.base_dofs.size
+        if self.free:
+            self.tip_rows = np.arange(3)
+            self.lin = np.arange(3)  # base position coordinates inside the base block
+            blocks = [np.full(3, GAIN_BASE_POSITION), np.full(3, GAIN_BASE_ROTATION), np.full(3, GAIN_TIP)]
+            if self.tip_orientation:
+                blocks.append(np.full(3, GAIN_TIP))
+        else:
+            jids = [int(m.dof_jntid[d]) for d in self.base_dofs]
+            self.base_qpos = np.array([m.jnt_qposadr[j] for j in jids], dtype=int)
+            slides = [i for i, j in enumerate(jids) if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE]
+            self.lin = np.array(slides, dtype=int)
+            mujoco.mj_kinematics(m, robot.data)
+            self.tip_rows = np.array(sorted({int(np.argmax(np.abs(robot.data.xaxis[jids[i]]))) for i in slides}),
+                                     dtype=int)
+            base_gain = np.array([GAIN_BASE_POSITION if i in slides else GAIN_BASE_ROTATION for i in range(nb)])
+            blocks = [base_gain, np.full(self.tip_rows.size, GAIN_TIP)]
+        default = np.concatenate(blocks)
+        self.ntask = default.size
+        self.nbt = 6 if self.free else nb  # base rows of the task
+        self.gamma = _gains("gamma", gamma, default)
+        self.lam = _gains("lambda", lam, default)
+        self.js = check_positive("js", js)
+        self.js_high = self.js if js_high is None else check_positive("js_high", js_high)
+        if self.js_high < self.js:
+            raise ControllerError(f"js_high = {js_high!r} must be >= js = {js!r}")
+        if int(n_ramp) != n_ramp or n_ramp < 1:
+            raise ControllerError(f"n_ramp = {n_ramp!r} must be an integer >= 1")
+        self.n_ramp = int(n_ramp)
+        size = 7 if self.free else nb
+        self.base_reference = None if base_reference is None else np.asarray(base_reference, dtype=float)
+        if self.base_reference is not None and (self.base_reference.shape != (size,)
+                                                or not np.all(np.isfinite(self.base_reference))):
+            raise ControllerError(f"base_reference = {base_reference!r} must be {size} finite numbers")
+        self.dls_threshold = check_positive("dls_threshold", dls_threshold)
+        self.dls_damping = check_positive("dls_damping", dls_damping)
+        self.null_kp = float(null_kp)
+        self.null_kd = float(null_kd)
+        if not (math.isfinite(self.null_kp) and self.null_kp >= 0 and math.isfinite(self.null_kd) and self.null_kd >= 0):
+            raise ControllerError(f"null_kp = {null_kp!r}, null_kd = {null_kd!r} must be finite and >= 0")
+        self.tf = check_positive("tf", tf)
+        if observer_gain not in ("1/Tf", "(1-h)/T"):
+            raise ControllerError(f"observer_gain = {observer_gain!r}; allowed: 1/Tf, (1-h)/T")
+        if observer_input not in ("allocated", "commanded"):
+            raise ControllerError(f"observer_input = {observer_input!r}; allowed: allocated, commanded")
+        self.observer_input = observer_input
+        self.filter = LowPassZOH(self.T, self.tf, size=nb)
+        self.g = 1.0 / self.tf if observer_gain == "1/Tf" else (1.0 - self.filter.h) / self.T
+        # thrusters: body-frame allocation on the rows the base can move
+        if allocation not in ("auto", "clip", "wls"):
+            raise ControllerError(f"allocation = {allocation!r}; allowed: auto, clip, wls")
+        B = robot.allocation()
+        robot._set(m.qpos0.copy())
+        Jb = self._base_jac(robot.jacobians())
+        R0 = robot.data.xmat[lay.base_body].reshape(3, 3)
+        mob = np.vstack((R0.T @ Jb[:3], R0.T @ Jb[3:]))
+        self.wrench_rows = np.flatnonzero(np.linalg.norm(mob, axis=1) > 1e-9)
+        Bc = B[self.wrench_rows]
+        if allocation == "auto":
+            allocation = "clip" if Bc.shape[0] == Bc.shape[1] else "wls"
+        self.allocation = allocation
+        self.B = B
+        self.lo, self.hi = robot.thruster_lo, robot.thruster_hi
+        self.B_pinv = np.linalg.pinv(Bc)
+        self.allocator = Allocator(B, self.lo, self.hi, dofs=self.wrench_rows) if allocation == "wls" else None
+
+    # ---------------------------------------------------------------- task space
+
+    def _base_jac(self, jac: dict) -> np.ndarray:
+        """(6, nb): world linear and angular velocity of the vehicle origin per base dof."""
+        return np.vstack((jac["base_p"], jac["base_r"]))[:, self.base_dofs]
+
+    def _task(self, q: np.ndarray, jac: dict) -> tuple[np.ndarray, list[np.ndarray]]:
+        """p as (vector part, rotation matrices): planar (base coords, tip rows); floating
+        (base position, tip position; rotations R_base [, R_tip])."""
+        if self.free:
+            a = self.robot.layout.base_qadr
+            vec = np.concatenate((q[a:a + 3], jac["tip"]))
+            rots = [quat_to_mat(q[a + 3:a + 7])] + ([jac["R_tip"]] if self.tip_orientation else [])
+            return vec, rots
+        return np.concatenate((q[self.base_qpos], jac["tip"][self.tip_rows])), []
+
+    def _diff(self, a: tuple, b: tuple) -> np.ndarray:
+        """a - b in the task space (rotation parts: log(R_a R_b^T), world axes)."""
+        (va, ra), (vb, rb) = a, b
+        if not self.free:
+            return va - vb
+        out = np.empty(self.ntask)
+        out[0:3] = va[0:3] - vb[0:3]
+        out[3:6] = rotation_log(ra[0] @ rb[0].T)
+        out[6:9] = va[3:6] - vb[3:6]
+        if self.tip_orientation:
+            out[9:12] = rotation_log(ra[1] @ rb[1].T)
+        return out
+
+    def _jacobian(self, jac: dict) -> np.ndarray:
+        nv = self.robot.model.nv
+        if self.free:
+            rows = [jac["base_p"], jac["base_r"], jac["tip_p"]] + ([jac["tip_r"]] if self.tip_orientation else [])
+            return np.vstack(rows)
+        J = np.zeros((self.ntask, nv))
+        J[np.arange(self.base_dofs.size), self.base_dofs] = 1.0
+        J[self.base_dofs.size:] = jac["tip_p"][self.tip_rows]
+        return J
+
+    def _desired(self, k: int) -> tuple[np.ndarray, list[np.ndarray]]:
+        """p_d(k): base reference plus the Eq. 12 offset, and the tip path."""
+        t = k * self.T
+        off = self._base_offset[k]
+        tip = self._tip_d(t)
+        if self.free:
+            vec = np.concatenate((self._ref_pos + off, tip))
+            rots = [self._ref_R] + ([self._tip_R_d(t)] if self.tip_orientation else [])
+            return vec, rots
+        base = self._ref_pos.copy()
+        base[self.lin] += off
+        return np.concatenate((base, tip)), []
+
+    def _tip_d(self, t: float) -> np.ndarray:
+        if self.trajectory is None:
+            return self._tip0.copy()
+        p = np.asarray(self.trajectory.position(t), dtype=float).ravel()
+        if self.free:
+            return p[:3]
+        return p[self.tip_rows] if p.size == 3 else p[: self.tip_rows.size]
+
+    def _tip_R_d(self, t: float) -> np.ndarray:
+        tr = self.trajectory
+        if tr is not None and getattr(tr, "has_orientation", False):
+            return quat_to_mat(tr.orientation(t))
+        return self._tip_R0
+
+    def _v_event(self, k: int) -> np.ndarray:
+        tr = self.trajectory
+        if tr is None:
+            v = np.zeros(3)
+        elif hasattr(tr, "cruise_velocity"):
+            v = np.asarray(tr.cruise_velocity(), dtype=float).ravel()
+        else:
+            v = np.asarray(tr.velocity(k * self.T), dtype=float).ravel()
+        if self.free:
+            return np.resize(v, 3) if v.size != 3 else v
+        n = self.lin.size
+        return v[self.tip_rows] if v.size == 3 else v[:n]
+
+    # ---------------------------------------------------------------- interface
+
+    def reset(self, m: Measurement) -> None:
+        r, lay = self.robot, self.robot.layout
+        q = np.asarray(m.q, dtype=float)
+        qd0 = np.zeros(r.model.nv) if m.qd is None else np.asarray(m.qd, dtype=float)
+        M, _ = r.dynamics(q, qd0)
+        jac = r.jacobians()
+        self._tip0 = jac["tip"][:3].copy() if self.free else jac["tip"][self.tip_rows].copy()
+        self._tip_R0 = jac["R_tip"].copy()
+        if self.free:
+            a = lay.base_qadr
+            ref = q[a:a + 7] if self.base_reference is None else self.base_reference
+            self._ref_pos = np.array(ref[:3], dtype=float)
+            self._ref_R = quat_to_mat(ref[3:7])
+        else:
+            self._ref_pos = (q[self.base_qpos] if self.base_reference is None else self.base_reference).astype(float).copy()
+        self.q_rest = q[[int(r.model.jnt_qposadr[r.model.dof_jntid[d]]) for d in self.arm_dofs]].copy()
+        self.singular = _Singular(self.js, self.js_high, self.n_ramp, self._v_event,
+                                  3 if self.free else self.lin.size)
+        self._base_offset = {m.k: np.zeros(3 if self.free else self.lin.size)}
+        self._k0 = m.k
+        self._pd_prev = self._desired(m.k)
+        self._e_p_prev = np.zeros(self.ntask)
+        self._q_prev = q.copy()
+        self._p_prev = self._task(q, jac)
+        self._J_prev = self._jacobian(jac)
+        b = self.base_dofs
+        self.filter.reset(self.g * M[np.ix_(b, b)] @ qd0[b])  # f_E_hat(0) = 0
+
+    def _velocity(self, q: np.ndarray) -> np.ndarray:
+        """Backward difference of the measured coordinates as qvel (quaternions included)."""
+        qd = np.zeros(self.robot.model.nv)
+        mujoco.mj_differentiatePos(self.robot.model, qd, self.T, self._q_prev, q)
+        return qd
+
+    def compute(self, m: Measurement) -> Command:
+        T, k, r = self.T, m.k, self.robot
+        q = np.asarray(m.q, dtype=float)
+        first = k <= self._k0
+        if m.qd is None:
+            qd = np.zeros(r.model.nv) if first else self._velocity(q)
+        else:
+            qd = np.asarray(m.qd, dtype=float)
+        M, h = r.dynamics(q, qd)  # nominal model at the measured state (Eqs. 6-7)
+        jac = r.jacobians()
+        J = self._jacobian(jac)
+        p = self._task(q, jac)
+        if m.qd is None:
+            pd_meas = np.zeros(self.ntask) if first else self._diff(p, self._p_prev) / T
+        else:
+            pd_meas = J @ qd
+        b, a = self.base_dofs, self.arm_dofs
+        nbt = self.nbt
+        Bm = J[nbt:][:, a]  # arm Jacobian: tip rows, arm dofs
+        if Bm.shape[0] == Bm.shape[1]:
+            detb = float(np.linalg.det(Bm))
+            manip = abs(detb)
+        else:
+            detb = float("nan")
+            manip = float(np.sqrt(max(np.linalg.det(Bm @ Bm.T), 0.0)))
+
+        # Eq. 12: the base carries the arm while the manipulability is below js.
+        v_base = self.singular.update(k, manip)
+        self._base_offset[k + 1] = self._base_offset[k] + T * v_base
+
+        p_d = self._desired(k)
+        p_d_next = self._desired(k + 1)
+        e_p = self._diff(p_d, p)
+        v_d = (self._diff(p_d, self._pd_prev) + self.gamma * self._e_p_prev) / T  # Eq. 11
+        v_d_next = (self._diff(p_d_next, p_d) + self.gamma * e_p) / T  # Eq. 11 at k + 1
+        e_v = v_d - pd_meas
+        a_d = (v_d_next - v_d + self.lam * e_v) / T  # Eq. 10
+
+        # q_ddot_d from J q_ddot = a_d - J_dot q_dot, J_dot by backward difference (Eq. 9)
+        rhs = a_d.copy()
+        if not first:
+            rhs -= (J - self._J_prev) @ qd / T
+        qdd_d = np.zeros(r.model.nv)
+        S = J[:nbt][:, b]
+        qdd_d[b] = np.linalg.solve(S, rhs[:nbt]) if S.shape[0] == S.shape[1] else np.linalg.lstsq(S, rhs[:nbt], rcond=None)[0]
+        r_m = rhs[nbt:] - J[nbt:][:, b] @ qdd_d[b]
+        dls = manip < self.dls_threshold
+        mu2 = self.dls_damping ** 2 * (1.0 - (manip / self.dls_threshold) ** 2) if dls else 0.0
+        if Bm.shape[0] == Bm.shape[1]:
+            if dls:
+                qdd_d[a] = Bm.T @ np.linalg.solve(Bm @ Bm.T + mu2 * np.eye(Bm.shape[0]), r_m)
+            else:
+                qdd_d[a] = np.linalg.solve(Bm, r_m)
+        else:
+            W_inv = np.linalg.inv(M[np.ix_(a, a)])
+            G = Bm @ W_inv @ Bm.T + mu2 * np.eye(Bm.shape[0])
+            Bp = W_inv @ Bm.T @ np.linalg.inv(G)
+            qa = q[[int(r.model.jnt_qposadr[r.model.dof_jntid[d]]) for d in a]]
+            q0dd = self.null_kp * (self.q_rest - qa) - self.null_kd * qd[a]
+            qdd_d[a] = Bp @ r_m + (np.eye(a.size) - Bp @ Bm) @ q0dd
+
+        # Computed torque on the nominal model (Eq. 7 blocks), Eqs. 13 and 15.
+        M_BB, M_BM = M[np.ix_(b, b)], M[np.ix_(b, a)]
+        M_MB, M_MM = M[np.ix_(a, b)], M[np.ix_(a, a)]
+        u_M = M_MB @ qdd_d[b] + M_MM @ qdd_d[a] + h[a]
+        f_t = M_BM @ qdd_d[a] + h[b]  # Eq. 13
+        f_e_hat = self.filter.output() - self.g * M_BB @ qd[b] if self.observer else np.zeros(b.size)
+        u_B = M_BB @ qdd_d[b] + f_t + f_e_hat  # Eq. 15
+        thrust, saturated, u_applied = self._allocate(u_B, jac)
+        if self.observer:
+            # Eq. 14 corrected (Fig. 3(b)): w = u_B - f_t + g M_BB x0_dot; z(k+1) = h z + (1-h) w.
+            applied = u_applied if self.observer_input == "allocated" else u_B
+            self.filter.advance(applied - f_t + self.g * M_BB @ qd[b])
+
+        self._pd_prev, self._e_p_prev = p_d, e_p
+        self._q_prev, self._p_prev, self._J_prev = q, p, J
+        # joint torques for the motors' joints (in the motors' order)
+        motor_dofs = r.motor_dofs
+        pos = {int(d): i for i, d in enumerate(a)}
+        torques = np.array([u_M[pos[int(d)]] for d in motor_dofs])
+        signals = {"e_p": e_p, "e_v": e_v, "v_desired": v_d, "a_desired": a_d, "qdd_desired": qdd_d,
+                   "u_B": u_B, "u_B_applied": u_applied, "f_E_hat": f_e_hat, "manipulability": manip,
+                   "singular_phase": self.singular.phase, "dls_active": dls, "thrust_saturated": saturated}
+        if self.free:
+            signals["base_desired"] = np.concatenate((p_d[0][:3], _mat_to_quat(p_d[1][0])))
+            signals["tip_desired"] = p_d[0][3:6].copy()
+            signals["tip_measured"] = p[0][3:6].copy()
+        else:
+            signals = {"p_desired": p_d[0], "p_measured": p[0], **signals, "det_B": detb}
+        return Command(thrust=thrust, torques=torques, signals=signals)
+
+    def _allocate(self, u_B: np.ndarray, jac: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Generalized base force -> thrusts; returns (thrust, saturated, achieved base force)."""
+        Jb = self._base_jac(jac)  # u_B = Jb^T w (w: world wrench at the vehicle origin)
+        w = np.linalg.pinv(Jb.T) @ u_B if not self.free else np.concatenate((u_B[:3], jac["R_base"] @ u_B[3:]))
+        R = jac["R_base"]
+        body = np.concatenate((R.T @ w[:3], R.T @ w[3:]))
+        if self.allocator is not None:
+            res = self.allocator(body[self.wrench_rows])
+            f, sat = res.thrust, res.saturated
+        else:
+            f = self.B_pinv @ body[self.wrench_rows]
+            sat = (f < self.lo) | (f > self.hi)
+            if sat.any():
+                f = np.clip(f, self.lo, self.hi)
+        produced = self.B @ f
+        w_out = np.concatenate((R @ produced[:3], R @ produced[3:]))
+        return f, sat, Jb.T @ w_out
+
+
+@register("rac_dob")
+class RACDOB(RAC):
+    """RAC plus the digital disturbance observer on the base (Eq. 14 corrected, Fig. 3(b)),
+    h = exp(-T / Tf), Tf = 10 s (paper), for any robot."""
+
+    observer = True
