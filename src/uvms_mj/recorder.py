@@ -590,7 +590,7 @@ def _encode(value: Any, is_bool: bool, flat: bool) -> Any:
     if type(value) is np.ndarray and not flat:
         return (value.astype(np.uint8) if is_bool else value).tolist()
     if not (is_bool or flat) and isinstance(value, (float, int)) and not isinstance(value, bool):
-        return value
+        return value.item() if isinstance(value, np.generic) else value  # np.float64: orjson wants a float
     arr = np.asarray(value)
     if is_bool:
         arr = arr.astype(np.uint8)
