@@ -335,7 +335,6 @@ def test_follow_cameras_keep_the_vehicle_in_view(recorded, camera) -> None:
 
 
 def test_render_video_and_compare(recorded, alpha, tmp_path) -> None:
-    from uvms_mj.experiment import PaperExperiment
     from uvms_mj.render import render_compare_video, render_video
 
     log = read_log(recorded[0])
@@ -349,7 +348,6 @@ def test_render_video_and_compare(recorded, alpha, tmp_path) -> None:
     paper = SimpleNamespace(t=np.arange(3) * T, signals={"q_true": np.zeros((3, 5))}, meta={})
     with pytest.raises(ValueError, match="not supported"):
         render_compare_video(log, paper, tmp_path / "d.mp4", fps=4, size=(320, 120))
-    del PaperExperiment
 
 
 def test_render_robot_without_tip(tmp_path) -> None:

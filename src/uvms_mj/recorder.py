@@ -141,7 +141,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from importlib import metadata as _importlib_metadata
 from pathlib import Path
-from typing import Any, Iterator, Mapping
+from typing import TYPE_CHECKING, Any, Iterator, Mapping
 
 import numpy as np
 from mcap.exceptions import McapError
@@ -150,6 +150,9 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
 from .loop import RunResult
+
+if TYPE_CHECKING:
+    import mujoco
 from .params import ARM_JOINTS, BASE_JOINTS, BodyParams, RobotParams, ThrusterParams
 
 __all__ = [
@@ -756,8 +759,8 @@ class _RobotChannels:
                           "no /tf or /joint_states", stacklevel=4)
         if self.has_tf:
             self.tf_id = channel(TOPIC_TF, "foxglove.FrameTransforms", SCHEMAS["foxglove.FrameTransforms"])
-            self._tf_heads = ['{"timestamp":%%s,"parent_frame_id":"world","child_frame_id":%s,' % json.dumps(n).replace("%", "%%")
-                              for n in self.body_names]
+            self._tf_heads = ['{"timestamp":%%s,"parent_frame_id":"world","child_frame_id":%s,'
+                              % json.dumps(n).replace("%", "%%") for n in self.body_names]
         self.has_joints = self.has_tf and len(lay.joint_names) > 0
         if self.has_joints:
             self.js_id = channel(TOPIC_JOINTS, "foxglove.JointStates", SCHEMAS["foxglove.JointStates"])
@@ -1004,7 +1007,7 @@ class McapRecorder:
         path_resolution: float = 0.1,
         chunk_size: int = 512 * 1024,
         compression: str = "zstd",
-        model: Any = None,
+        model: "mujoco.MjModel | None" = None,
     ) -> None:
         if not (flush_interval >= 0 and math.isfinite(flush_interval)):
             raise ValueError(f"flush_interval = {flush_interval!r} s must be finite and >= 0")

@@ -48,7 +48,7 @@ import platform
 import sys
 import time
 from pathlib import Path
-from typing import Any, Callable, Iterator
+from typing import Any, Callable, Iterator, Mapping
 
 import numpy as np
 
@@ -732,9 +732,9 @@ _RGBA_BASE = np.array([0.3, 0.6, 1.0, 1.0], dtype=np.float32)
 def robot_of(log) -> dict | None:
     """The log's robot description (``meta["robot"]``) when it is a robot log (name not
     "paper"), else None (the paper's planar robot)."""
-    meta = getattr(log, "meta", None) or {}
-    robot = meta.get("robot") if isinstance(meta, dict) or hasattr(meta, "get") else None
-    if not hasattr(robot, "get") or robot.get("name") in (None, "", "paper"):
+    meta = getattr(log, "meta", None)
+    robot = meta.get("robot") if isinstance(meta, Mapping) else None
+    if not isinstance(robot, Mapping) or robot.get("name") in (None, "", "paper"):
         return None
     return dict(robot)
 
@@ -840,7 +840,8 @@ def _robot_scene_model(robot: dict, q_log: np.ndarray, width: int, height: int,
     from .robot import Layout, compile_robot_spec
 
     path = _robot_file(robot, model_path)
-    tip = ((robot.get("layout") or {}).get("tip_site") or None) if hasattr(robot.get("layout"), "get") else None
+    layout_meta = robot.get("layout")
+    tip = (layout_meta.get("tip_site") or None) if isinstance(layout_meta, Mapping) else None
     try:
         plain = compile_robot_spec(path)
         layout = Layout.of(plain, tip)
