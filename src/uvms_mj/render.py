@@ -837,7 +837,7 @@ def _robot_scene_model(robot: dict, q_log: np.ndarray, width: int, height: int,
     import mujoco
 
     from .params import ParameterError
-    from .robot import Layout, compile_robot_spec
+    from .robot import Layout, compile_robot_spec, rpy_from_quat
 
     path = _robot_file(robot, model_path)
     layout_meta = robot.get("layout")
@@ -854,7 +854,7 @@ def _robot_scene_model(robot: dict, q_log: np.ndarray, width: int, height: int,
     data = mujoco.MjData(plain)
     lo, hi = _geom_box(plain, data, q0)
     a = layout.base_qadr
-    yaw = math.atan2(2 * (q0[a + 3] * q0[a + 6] + q0[a + 4] * q0[a + 5]), 1 - 2 * (q0[a + 5] ** 2 + q0[a + 6] ** 2))
+    yaw = float(rpy_from_quat(q0[a + 3:a + 7])[2]) if np.linalg.norm(q0[a + 3:a + 7]) > 0 else 0.0
     fovy = 45.0
     cams = _robot_cameras(lo, hi, q0[a:a + 3], yaw, fovy)
     # Track cameras keep their qpos0 offset from the body (world frame): express the wanted
@@ -1245,6 +1245,7 @@ def render_compare_video(
     camera (``camera``: one of :data:`ROBOT_CAMERAS`, default the three-quarter view), and the
     inset plots the end-tip error norm when both runs logged ``tip_desired`` (else the base
     position error norm). A robot log and a paper log cannot be compared (ValueError).
+    ``camera`` is for robot logs only (the paper's halves always use the fitted side view).
     """
     out_path = Path(out_path)
     width, height = int(size[0]), int(size[1])
