@@ -387,3 +387,12 @@ def test_plots_with_and_without_optional_signals(recorded, alpha, tmp_path) -> N
     paper = SimpleNamespace(t=np.arange(3) * T, signals={"q_true": np.zeros((3, 5))}, meta={"controller": "rac"})
     with pytest.raises(ValueError, match="not supported"):
         plot_comparison({"full": full, "paper": paper}, tmp_path / "mixed.png")
+
+
+def test_robot_model_file_fallbacks(alpha) -> None:
+    from uvms_mj.render import _robot_file
+
+    robot = dict(alpha[1].meta["robot"], path="/nonexistent/bluerov2_alpha.xml")
+    assert _robot_file(robot, None).name == "bluerov2_alpha.xml"  # the built-in of that name
+    with pytest.raises(ValueError, match="model_path"):
+        _robot_file(dict(robot, name="my_rov"), None)
