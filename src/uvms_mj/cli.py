@@ -453,8 +453,11 @@ def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str
               help="Width and height [px] (default 640 480; with --compare 1280 480, plus the inset).")
 @click.option("--labels/--no-labels", default=True, show_default=True,
               help="Controller name, legend and scale bar on the frames.")
+@click.option("--camera", default=None, metavar="NAME",
+              help="A camera of the scene by name. Robot logs: follow_three_quarter (default) or follow_side; "
+                   "paper logs: the fitted side view by default, or side / track.")
 def render(logs: tuple[str, ...], out: str | None, out_old: str | None, compare: bool, fps: int,
-           size: tuple[int, int] | None, labels: bool) -> None:
+           size: tuple[int, int] | None, labels: bool, camera: str | None) -> None:
     """Replay LOG's states in MuJoCo and render an MP4 off-screen (no re-simulation).
 
     With --compare, LOG and LOG_B side by side (e.g. rac and rac_dob)."""
@@ -473,9 +476,11 @@ def render(logs: tuple[str, ...], out: str | None, out_old: str | None, compare:
     try:
         with _progress(f"render {path.name}", "frame") as tick:
             if compare:
-                info = render_compare_video(runs[0], runs[1], path, fps=fps, size=size or (1280, 480), on_frame=tick)
+                info = render_compare_video(runs[0], runs[1], path, fps=fps, size=size or (1280, 480), on_frame=tick,
+                                            camera=camera)
             else:
-                info = render_video(runs[0], path, fps=fps, size=size or (640, 480), on_frame=tick, labels=labels)
+                info = render_video(runs[0], path, fps=fps, size=size or (640, 480), on_frame=tick, labels=labels,
+                                    camera=camera)
     except RenderError as exc:
         click.echo(f"error: {exc}", err=True)
         sys.exit(EXIT_RENDER)

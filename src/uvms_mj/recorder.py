@@ -50,6 +50,43 @@ topic                  schema                   content and rate
                                                 one per sample.
 =====================  =======================  ==============================================
 
+Robot logs (any floating robot: ``McapRecorder(path, None, metadata, model=plant.model)``
+with a :class:`~uvms_mj.robot.RobotPlant`'s model; World z up, so no ``view`` frame) have the
+same ``/state/true`` and ``/control`` channels and, by the model's own names
+(:class:`~uvms_mj.robot.Layout`):
+
+=====================  =======================  ==============================================
+topic                  schema                   content and rate
+=====================  =======================  ==============================================
+``/tf``                foxglove.FrameTransforms ``world -> <body>`` for every body (parent
+                                                ``world``, pose of the body frame in the world
+                                                from ``q_true`` through ``mj_kinematics``);
+                                                one message per sample.
+``/scene``             foxglove.SceneUpdate     per body a frame-locked entity (id and frame =
+                                                the body's name) with its geoms of groups 0-2
+                                                (box -> cube, sphere/ellipsoid -> sphere,
+                                                cylinder/capsule -> cylinder, mesh -> its
+                                                bounding box; planes left out; colour from
+                                                ``geom_rgba``), ``thrusters`` (an arrow along
+                                                each thruster site's x axis: positive thrust),
+                                                ``tip`` (a sphere at the tip site); once, at
+                                                the first sample.
+``/scene/paths``       foxglove.SceneUpdate     3-D line strips in ``world``: desired tip path
+                                                (``tip_desired``, green, when logged), tip path
+                                                (``tip_true``, red, when the robot has a tip)
+                                                and base path (``q_true[0:3]``, blue); as for
+                                                the paper's paths.
+``/joint_states``      foxglove.JointStates     the arm joints (Layout.joint_names): position
+                                                [rad] from ``q_true``, velocity [rad/s] from
+                                                ``qd_true``; one per sample (none for a robot
+                                                without joints).
+``/thrusters``         uvms_mj.Thrusters        ``t`` and, per thruster actuator name,
+                                                ``{"command", "force"}`` [N] (from
+                                                ``thrust_command`` / ``thrust_force``); plot
+                                                e.g. ``/thrusters.bluerov2_t1.force``. One per
+                                                sample.
+=====================  =======================  ==============================================
+
 Per-sample signals are plotted in Foxglove's Plot panel with message paths such as
 ``/control.e_p[3]``, ``/control.det_B`` or ``/state/true.q_true[2]``. Booleans are written as
 0/1 integers (so that they plot) and arrays of two or more dimensions are flattened row-major
@@ -104,7 +141,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from importlib import metadata as _importlib_metadata
 from pathlib import Path
-from typing import Any, Iterator, Mapping
+from typing import TYPE_CHECKING, Any, Iterator, Mapping
 
 import numpy as np
 from mcap.exceptions import McapError
@@ -113,6 +150,9 @@ from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import CompressionType, Writer
 
 from .loop import RunResult
+
+if TYPE_CHECKING:
+    import mujoco
 from .params import ARM_JOINTS, BASE_JOINTS, BodyParams, RobotParams, ThrusterParams
 
 __all__ = [
@@ -553,16 +593,34 @@ def _encode(value: Any, is_bool: bool, flat: bool) -> Any:
     if type(value) is np.ndarray and not flat:
         return (value.astype(np.uint8) if is_bool else value).tolist()
     if not (is_bool or flat) and isinstance(value, (float, int)) and not isinstance(value, bool):
-        return value
+        return value.item() if isinstance(value, np.generic) else value  # np.float64: orjson wants a float
     arr = np.asarray(value)
     if is_bool:
         arr = arr.astype(np.uint8)
     return (arr.ravel() if flat else arr).tolist()
 
 
-def _point(x: float, y: float) -> str:
-    """A foxglove.Point3 in the plane (JSON text), rounded to 1 um."""
-    return '{"x":%r,"y":%r,"z":0.0}' % (round(x, 6), round(y, 6))
+def _point(x: float, y: float, z: float | None = None) -> str:
+    """A foxglove.Point3 (JSON text), rounded to 1 um; without ``z``, in the plane z = 0."""
+    if z is None:
+        return '{"x":%r,"y":%r,"z":0.0}' % (round(x, 6), round(y, 6))
+    return '{"x":%r,"y":%r,"z":%r}' % (round(x, 6), round(y, 6), round(z, 6))
+
+
+@dataclass(frozen=True)
+class _PathSpec:
+    """A line strip of ``/scene/paths``: ``dims`` numbers of signal ``signal`` from ``start``."""
+
+    key: str
+    signal: str
+    start: int
+    dims: int
+    rgba: tuple[float, float, float]
+    entity: str
+
+
+_PAPER_PATHS = (_PathSpec("desired", "p_desired", 3, 2, (0.1, 0.8, 0.2), "desired_tip_path"),
+                _PathSpec("true", "tip_true", 0, 2, (0.95, 0.2, 0.2), "true_tip_path"))
 
 
 def _tf_template(chain: list[tuple[str, str, tuple[float, float] | None, dict | None]]) -> str:
@@ -584,6 +642,215 @@ def _tf_template(chain: list[tuple[str, str, tuple[float, float] | None, dict | 
             rt = '"rotation":' + json.dumps(rot, separators=(",", ":")).replace("%", "%%") + "}"
         parts.append(head + tr + rt)
     return '{"transforms":[' + ",".join(parts) + "]}"
+
+
+# --------------------------------------------------------------------------- any robot (model given)
+
+TOPIC_THRUSTERS = "/thrusters"
+#: Geom types drawn on ``/scene`` for robot logs (the others -- plane, height field, SDF -- are
+#: left out); meshes are drawn as their bounding box.
+_GEOM_PRIMITIVE = {"box": "cubes", "sphere": "spheres", "ellipsoid": "spheres", "cylinder": "cylinders",
+                   "capsule": "cylinders", "mesh": "cubes"}
+_DEFAULT_RGBA = (0.5, 0.5, 0.5, 1.0)  # MuJoCo's default geom colour: the material's then wins
+
+
+def _tip_site_of(metadata: Mapping[str, Any]) -> str | None:
+    robot = metadata.get("robot")
+    layout = robot.get("layout") if isinstance(robot, Mapping) else None
+    tip = layout.get("tip_site") if isinstance(layout, Mapping) else None
+    return str(tip) if tip else None
+
+
+def _fox_quat(q_wxyz) -> dict:
+    w, x, y, z = (float(v) for v in q_wxyz)
+    return {"x": x, "y": y, "z": z, "w": w}
+
+
+def _fox_pose(pos, q_wxyz) -> dict:
+    return {"position": {"x": float(pos[0]), "y": float(pos[1]), "z": float(pos[2])},
+            "orientation": _fox_quat(q_wxyz)}
+
+
+def _thrusters_schema(names: tuple[str, ...], fields: tuple[str, ...]) -> dict:
+    what = {"command": "commanded thrust [N]", "force": "actual thrust [N] (lagged, saturated)"}
+    props: dict = {"timestamp": _time_schema(), "t": {"type": "number", "description": "sample time [s]"}}
+    for n in names:
+        props[n] = _obj(None, {f: {"type": "number", "description": what[f]} for f in fields})
+    return _obj("uvms_mj.Thrusters", props, description="Thrust of each thruster [N], by actuator name "
+                "(null = NaN)")
+
+
+def geom_primitive(model, g: int) -> tuple[str, dict] | None:
+    """The Foxglove primitive (list name, primitive) of geom ``g`` in its body's frame, or None
+    for geoms that are not drawn (plane, height field, SDF, group >= 3, fully transparent).
+
+    Sizes [m]: box -> cube of the full edges; sphere / ellipsoid -> sphere of the diameters;
+    cylinder -> cylinder (Foxglove's axis is z, as MuJoCo's); capsule -> cylinder of the total
+    length (the caps approximated); mesh -> cube of its bounding box.
+    """
+    import mujoco
+
+    kind = mujoco.mjtGeom(int(model.geom_type[g])).name.removeprefix("mjGEOM_").lower()
+    if kind not in _GEOM_PRIMITIVE or int(model.geom_group[g]) >= 3:
+        return None
+    rgba = tuple(float(v) for v in model.geom_rgba[g])
+    mat = int(model.geom_matid[g])
+    if mat >= 0 and np.allclose(rgba, _DEFAULT_RGBA):
+        rgba = tuple(float(v) for v in model.mat_rgba[mat])
+    if rgba[3] <= 0:
+        return None
+    size = np.asarray(model.geom_size[g], dtype=float)
+    pos, quat = np.asarray(model.geom_pos[g], dtype=float), np.asarray(model.geom_quat[g], dtype=float)
+    if kind == "box":
+        dims = 2 * size
+    elif kind == "sphere":
+        dims = np.full(3, 2 * size[0])
+    elif kind == "ellipsoid":
+        dims = 2 * size
+    elif kind == "cylinder":
+        dims = np.array([2 * size[0], 2 * size[0], 2 * size[1]])
+    elif kind == "capsule":
+        dims = np.array([2 * size[0], 2 * size[0], 2 * (size[1] + size[0])])
+    else:  # mesh: its bounding box (centre and half sizes in the geom frame)
+        aabb = np.asarray(model.geom_aabb[g], dtype=float)
+        rot = np.empty(9)
+        mujoco.mju_quat2Mat(rot, quat)
+        pos = pos + rot.reshape(3, 3) @ aabb[:3]
+        dims = 2 * aabb[3:]
+    prim: dict = {"pose": _fox_pose(pos, quat), "size": {"x": float(dims[0]), "y": float(dims[1]),
+                                                          "z": float(dims[2])},
+                  "color": _color(*rgba)}
+    if _GEOM_PRIMITIVE[kind] == "cylinders":
+        prim["bottom_scale"] = 1.0
+        prim["top_scale"] = 1.0
+    return _GEOM_PRIMITIVE[kind], prim
+
+
+class _RobotChannels:
+    """The Foxglove channels of any robot's log, by the model's own names: ``/tf`` (world ->
+    every body, from ``q_true`` through ``mj_kinematics``), ``/scene`` (geoms, thruster arrows,
+    tip), ``/joint_states`` (the arm joints), ``/thrusters`` (command and force per thruster)
+    and the specs of the ``/scene/paths`` line strips."""
+
+    def __init__(self, model, tip_site: str | None) -> None:
+        import mujoco
+
+        from .robot import Layout
+
+        if not isinstance(model, mujoco.MjModel):
+            raise TypeError(f"McapRecorder: model must be a mujoco.MjModel, not {type(model).__name__}")
+        self.model = model
+        self.layout = Layout.of(model, tip_site)
+        self.data = mujoco.MjData(model)
+        self.bodies = list(range(1, model.nbody))
+        self.body_names = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) or f"body{b}" for b in self.bodies]
+        self.body_name = {b: n for b, n in zip(self.bodies, self.body_names)}
+        self.body_name[0] = "world"
+        self.has_tf = self.has_joints = False
+        self.thr_fields: tuple[str, ...] = ()
+
+    # ---------------------------------------------------------------- setup
+
+    def start(self, channel, writer, ns: int, stamp: dict, row: Mapping[str, Any]) -> None:
+        m, lay = self.model, self.layout
+        self.has_tf = np.shape(row.get("q_true", ())) == (m.nq,)
+        if "q_true" in row and not self.has_tf:
+            warnings.warn(f"recorder: q_true has shape {np.shape(row['q_true'])}, the model {m.nq} positions: "
+                          "no /tf or /joint_states", stacklevel=4)
+        if self.has_tf:
+            self.tf_id = channel(TOPIC_TF, "foxglove.FrameTransforms", SCHEMAS["foxglove.FrameTransforms"])
+            self._tf_heads = ['{"timestamp":%%s,"parent_frame_id":"world","child_frame_id":%s,'
+                              % json.dumps(n).replace("%", "%%") for n in self.body_names]
+        self.has_joints = self.has_tf and len(lay.joint_names) > 0
+        if self.has_joints:
+            self.js_id = channel(TOPIC_JOINTS, "foxglove.JointStates", SCHEMAS["foxglove.JointStates"])
+            self._js_names = [json.dumps(n) for n in lay.joint_names]
+            self._js_vel = np.shape(row.get("qd_true", ())) == (m.nv,)
+        n_thr = len(lay.thruster_names)
+        self.thr_fields = tuple(f for f, sig in (("command", "thrust_command"), ("force", "thrust_force"))
+                                if n_thr and np.shape(row.get(sig, ())) == (n_thr,))
+        self._thr_sig = {"command": "thrust_command", "force": "thrust_force"}
+        if self.thr_fields:
+            self.thr_id = channel(TOPIC_THRUSTERS, "uvms_mj.Thrusters",
+                                  _thrusters_schema(lay.thruster_names, self.thr_fields))
+            self._thr_names = [json.dumps(n) for n in lay.thruster_names]
+        scene_id = channel(TOPIC_SCENE, "foxglove.SceneUpdate", SCHEMAS["foxglove.SceneUpdate"])
+        writer.add_message(scene_id, ns, _dumps(self.scene(stamp)), ns, 0)
+
+    def path_specs(self, row: Mapping[str, Any]) -> tuple[_PathSpec, ...]:
+        specs = []
+        if np.shape(row.get("tip_desired", ())) == (3,):
+            specs.append(_PathSpec("tip_desired", "tip_desired", 0, 3, (0.1, 0.8, 0.2), "desired_tip_path"))
+        if np.shape(row.get("tip_true", ())) == (3,) and self.layout.tip_site >= 0:
+            specs.append(_PathSpec("tip_true", "tip_true", 0, 3, (0.95, 0.2, 0.2), "true_tip_path"))
+        if self.has_tf:
+            specs.append(_PathSpec("base", "q_true", self.layout.base_qadr, 3, (0.2, 0.5, 1.0), "base_path"))
+        return tuple(specs)
+
+    def scene(self, stamp: dict) -> dict:
+        """The robot's SceneUpdate: per body a frame-locked entity (id = frame = the body's name)
+        with its drawn geoms; the thruster arrows (along each thruster site's x axis, the
+        direction of positive thrust); a sphere at the tip site."""
+        m, lay = self.model, self.layout
+        per_body: dict[int, dict[str, list]] = {}
+        for g in range(m.ngeom):
+            prim = geom_primitive(m, g)
+            if prim is not None:
+                per_body.setdefault(int(m.geom_bodyid[g]), {}).setdefault(prim[0], []).append(prim[1])
+        ents = [_entity(self.body_name[b], self.body_name[b], stamp, **prims) for b, prims in sorted(per_body.items())]
+        arrows: dict[int, list] = {}
+        for a in lay.thruster_ids:
+            s = int(m.actuator_trnid[a][0])
+            arrows.setdefault(int(m.site_bodyid[s]), []).append(
+                {"pose": _fox_pose(m.site_pos[s], m.site_quat[s]), "shaft_length": 0.12, "shaft_diameter": 0.015,
+                 "head_length": 0.04, "head_diameter": 0.035, "color": _color(0.2, 0.6, 1.0)})
+        for b, arr in sorted(arrows.items()):
+            eid = "thrusters" if len(arrows) == 1 else f"thrusters/{self.body_name[b]}"
+            ents.append(_entity(self.body_name[b], eid, stamp, arrows=arr))
+        if lay.tip_site >= 0:
+            s = lay.tip_site
+            tip = {"pose": _fox_pose(m.site_pos[s], (1.0, 0.0, 0.0, 0.0)), "size": {"x": 0.025, "y": 0.025, "z": 0.025},
+                   "color": _color(1.0, 0.2, 0.2)}
+            ents.append(_entity(self.body_name[int(m.site_bodyid[s])], "tip", stamp, spheres=[tip]))
+        return {"deletions": [], "entities": ents}
+
+    # ---------------------------------------------------------------- per sample
+
+    def write(self, w, ns: int, stamp: str, head: str, k: int, row: Mapping[str, Any]) -> None:
+        import mujoco
+
+        lay = self.layout
+        if self.has_tf and "q_true" in row:
+            q = np.asarray(row["q_true"], dtype=float)
+            if np.all(np.isfinite(q)):
+                d = self.data
+                d.qpos[:] = q
+                mujoco.mj_kinematics(self.model, d)
+                pose = np.c_[d.xpos[1:], d.xquat[1:, 1:], d.xquat[1:, :1]]  # x y z, qx qy qz qw
+                nums = _enc(pose.ravel().tolist())[1:-1].split(",")
+                parts = []
+                for i, h in enumerate(self._tf_heads):
+                    v = nums[7 * i: 7 * i + 7]
+                    parts.append(h % stamp + '"translation":{"x":%s,"y":%s,"z":%s},"rotation":{"x":%s,"y":%s,'
+                                 '"z":%s,"w":%s}}' % tuple(v))
+                w.add_message(self.tf_id, ns, ('{"transforms":[' + ",".join(parts) + "]}").encode(), ns, k)
+            if self.has_joints:
+                pos = _enc(q[lay.joint_qadr].tolist())[1:-1].split(",")
+                vel = None
+                if self._js_vel and "qd_true" in row:
+                    vel = _enc(np.asarray(row["qd_true"], dtype=float)[lay.joint_dadr].tolist())[1:-1].split(",")
+                joints = ",".join('{"name":%s,"position":%s%s}' % (n, pos[i], "" if vel is None else
+                                                                  ',"velocity":' + vel[i])
+                                  for i, n in enumerate(self._js_names))
+                w.add_message(self.js_id, ns, ('{"timestamp":%s,"joints":[%s]}' % (stamp, joints)).encode(), ns, k)
+        if self.thr_fields:
+            cols = [_enc(np.asarray(row[self._thr_sig[f]], dtype=float).tolist())[1:-1].split(",")
+                    if self._thr_sig[f] in row else None for f in self.thr_fields]
+            items = []
+            for i, n in enumerate(self._thr_names):
+                vals = ",".join('"%s":%s' % (f, c[i]) for f, c in zip(self.thr_fields, cols) if c is not None)
+                items.append('%s:{%s}' % (n, vals))
+            w.add_message(self.thr_id, ns, (head + "," + ",".join(items) + "}").encode(), ns, k)
 
 
 class OutputPathError(ValueError):
@@ -708,7 +975,8 @@ class McapRecorder:
         path: output file (parent directories are created; an existing file is replaced). It is
             written under an exclusive lock (flock): a second recorder on the same path raises
             :class:`LogInUseError` instead of corrupting it; a symbolic link is not followed.
-        params: the plant's robot parameters (geometry of the frames and the scene).
+        params: the paper plant's robot parameters (geometry of the frames and the scene);
+            None for any other robot (give ``model``).
         metadata: JSON-able run description (resolved scenario, seed, ...), stored in the
             ``uvms_mj`` metadata record; keys in :data:`RESERVED_KEYS` are not allowed.
         flush_interval: the longest wall-clock time [s] between flushes to the file (0: flush
@@ -717,6 +985,11 @@ class McapRecorder:
         path_resolution: run time [s] between stored path points.
         chunk_size: MCAP chunk size [bytes] (a chunk is also finished at every flush).
         compression: "zstd", "lz4" or "none".
+        model: any floating robot's compiled model (a :class:`~uvms_mj.robot.RobotPlant`'s
+            ``model``; ``params`` must then be None): ``/tf``, ``/scene``, ``/joint_states``,
+            ``/thrusters`` and ``/scene/paths`` come from it by name (module docstring, robot
+            logs). The tip site is ``metadata["robot"]["layout"]["tip_site"]`` when given, else
+            :meth:`~uvms_mj.robot.Layout.of`'s default.
 
     Use it as a context manager: leaving the block closes the log, with status "ok", or
     "interrupted" on KeyboardInterrupt (and SIGTERM inside :func:`handle_sigterm`), or "error"
@@ -734,10 +1007,17 @@ class McapRecorder:
         path_resolution: float = 0.1,
         chunk_size: int = 512 * 1024,
         compression: str = "zstd",
+        model: "mujoco.MjModel | None" = None,
     ) -> None:
         if not (flush_interval >= 0 and math.isfinite(flush_interval)):
             raise ValueError(f"flush_interval = {flush_interval!r} s must be finite and >= 0")
         metadata = dict(metadata or {})
+        self._robot = None
+        if model is not None:
+            if params is not None:
+                raise ValueError("McapRecorder: give params (the paper's planar robot) or model (any robot), "
+                                 "not both")
+            self._robot = _RobotChannels(model, _tip_site_of(metadata))
         clash = sorted(set(metadata) & set(RESERVED_KEYS + ("status", "reason")))
         if clash:
             raise ValueError(f"metadata keys {clash} are reserved by the recorder")
@@ -774,9 +1054,10 @@ class McapRecorder:
         self._warned: set[str] = set()
         self._last_flush = time.monotonic()
         self._t0_stamp: dict | None = None
-        self._paths: dict[str, list[str]] = {"desired": [], "true": []}
-        self._path_last: dict[str, tuple[float, float] | None] = {"desired": None, "true": None}
-        self._path_kept_t: dict[str, float] = {"desired": -math.inf, "true": -math.inf}
+        self._paths: dict[str, list[str]] = {}
+        self._path_last: dict[str, tuple[float, ...] | None] = {}
+        self._path_kept_t: dict[str, float] = {}
+        self._path_specs: tuple[_PathSpec, ...] = ()
         self._path_sent_t = 0.0
         self._path_dirty = False
         self._last_ns = 0
@@ -819,6 +1100,15 @@ class McapRecorder:
 
         stamp = _stamp(ns)
         self._t0_stamp = stamp
+        if self._robot is not None:
+            self._has_q = False
+            self._robot.start(self._channel, self._writer, ns, stamp, row)
+            self._path_sent_t = ns * 1e-9
+            self._path_specs = self._robot.path_specs(row)
+            self._want_paths = bool(self._path_specs)
+            if self._want_paths:
+                self._channel(TOPIC_PATHS, "foxglove.SceneUpdate", SCHEMAS["foxglove.SceneUpdate"])
+            return
         self._has_q = "q_true" in row and np.shape(row["q_true"]) == (5,) and self.params is not None
         if self._has_q:
             self._channel(TOPIC_TF, "foxglove.FrameTransforms", SCHEMAS["foxglove.FrameTransforms"])
@@ -839,6 +1129,7 @@ class McapRecorder:
                                                    SCHEMAS["foxglove.SceneUpdate"]),
                                      ns, _dumps(self._robot_scene(stamp)), ns, 0)
         self._path_sent_t = ns * 1e-9
+        self._path_specs = _PAPER_PATHS
         self._want_paths = self.params is not None and (
             np.shape(row.get("p_desired", ())) == (5,) or np.shape(row.get("tip_true", ())) == (2,))
         if self._want_paths:
@@ -907,6 +1198,8 @@ class McapRecorder:
                                   for i, name in enumerate(self._js_names))
                 js = '{"timestamp":%s,"joints":[%s]}' % (stamp, joints)
                 w.add_message(self._channels[TOPIC_JOINTS], ns, js.encode(), ns, k)
+            if self._robot is not None:
+                self._robot.write(w, ns, stamp, head, k, row)
             if self._want_paths:
                 self._add_path_points(t, row)
                 if t - self._path_sent_t >= self.path_period - 1e-9:
@@ -917,29 +1210,29 @@ class McapRecorder:
                 self.flush()
 
     def _add_path_points(self, t: float, row: Mapping[str, Any]) -> None:
-        for key, name, i in (("desired", "p_desired", 3), ("true", "tip_true", 0)):
-            v = row.get(name)
+        for spec in self._path_specs:
+            key, i = spec.key, spec.start
+            v = row.get(spec.signal)
             if v is None:
                 continue
-            x, y = float(v[i]), float(v[i + 1])
-            if not (math.isfinite(x) and math.isfinite(y)):
+            xs = tuple(float(v[i + j]) for j in range(spec.dims))
+            if not all(math.isfinite(x) for x in xs):
                 continue
-            if t - self._path_kept_t[key] >= self.path_resolution - 1e-9:
-                self._paths[key].append(_point(x, y))
+            if t - self._path_kept_t.get(key, -math.inf) >= self.path_resolution - 1e-9:
+                self._paths.setdefault(key, []).append(_point(*xs))
                 self._path_kept_t[key] = t
                 self._path_last[key] = None
             else:
-                self._path_last[key] = (x, y)
+                self._path_last[key] = xs
             self._path_dirty = True
 
     def _write_paths(self, ns: int) -> None:
         stamp = _stamp(ns)
-        style = {"desired": (_color(0.1, 0.8, 0.2), "desired_tip_path"),
-                 "true": (_color(0.95, 0.2, 0.2), "true_tip_path")}
         ents, pts = [], {}
-        for key, (color, eid) in style.items():
-            points = list(self._paths[key])
-            if self._path_last[key] is not None:
+        for spec in self._path_specs:
+            key, color, eid = spec.key, _color(*spec.rgba), spec.entity
+            points = list(self._paths.get(key, ()))
+            if self._path_last.get(key) is not None:
                 points.append(_point(*self._path_last[key]))
             if len(points) < 2:
                 continue
