@@ -112,7 +112,7 @@ def damped_inverse(B: np.ndarray, threshold: float, damping: float) -> tuple[np.
 # ------------------------------------------------------------------ RAC
 
 
-@register("rac")
+@register("rac_planar")
 class RAC(Controller):
     """Digital resolved acceleration control (Eqs. 10-11) with the singular-configuration
     handling of Eq. 12, computed torque on the nominal model for the joints and Eqs. 13, 15 for
@@ -292,7 +292,7 @@ class RAC(Controller):
         )
 
 
-@register("rac_dob")
+@register("rac_dob_planar")
 class RACDOB(RAC):
     """RAC plus the digital disturbance observer on the base (Eq. 14 corrected, Fig. 3(b)),
     h = exp(-T / Tf), Tf = 10 s (paper)."""
