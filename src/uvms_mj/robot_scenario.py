@@ -70,6 +70,10 @@ from .nominal_robot import JointTrajectory, NominalRobot
 from .params import ParameterError
 from .robot import InitialState, Layout, RobotPlant, compile_robot_spec, quat_from_rpy, robot_path
 
+#: Default controller period [s]: 50 Hz, a whole multiple of the BlueROV2 models' 2 ms step
+#: (the paper's 1/60 s is not); every controller of a robot scenario runs at it.
+DEFAULT_PERIOD = 0.02
+
 #: Bounds (as the paper scenario's).
 POSITION_MAX = 1000.0  # [m] |initial.position|
 VELOCITY_MAX = 10.0  # [m/s], [rad/s] initial velocities
@@ -229,6 +233,14 @@ class RobotScenario(_Section):
     nominal: RobotNominalSection = Field(default_factory=RobotNominalSection)
     initial: Initial = Field(default_factory=Initial)
     arm: Arm = Field(default_factory=Arm)
+    trajectory: dict[str, Any] | None = Field(
+        None, description="desired end-effector path: {kind: line|waypoints|circle|lemniscate|helix|csv, ...} "
+        "(uvms_mj.trajectories.make_trajectory); null: hold the initial tip position")
+    trajectory_origin: Literal["tip", "world"] = Field(
+        "tip", description="tip: the path is shifted so that it starts at the initial tip position; world: as given")
+    control_period: float = Field(DEFAULT_PERIOD, ge=_S.PERIOD_RANGE[0], le=_S.PERIOD_RANGE[1],
+                                  description="controller period T [s] of every controller (a whole multiple of "
+                                  "the timestep)")
     sensors: _S.Sensors = Field(default_factory=_S.Sensors)
     controller: RobotController = Field(default_factory=RobotController)
     warm_start: bool = True
@@ -276,6 +288,17 @@ class RobotScenario(_Section):
                     issues.append((("arm", "waypoints", i, "joints", jn),
                                    f"not a joint of {self.robot}{_suggest(jn, names)}; joints: {', '.join(names) or 'none'}",
                                    _NO_VALUE))
+        if self.trajectory is not None:
+            from .trajectories import make_trajectory
+
+            try:
+                make_trajectory(self.trajectory, base_dir=self.base_dir)
+            except ValueError as exc:
+                msg = str(exc)
+                msg = msg[len("trajectory."):] if msg.startswith("trajectory.") else msg
+                issues.append((("trajectory",), msg, _NO_VALUE))
+            if lay.tip_site < 0:
+                issues.append((("trajectory",), f"robot {self.robot!r} has no end-effector site (tip_site)", _NO_VALUE))
         if self.arm.waypoints and not names:
             issues.append((("arm",), f"robot {self.robot!r} has no arm joints", _NO_VALUE))
         # controller: registered, for floating robots, its parameters valid
@@ -347,16 +370,50 @@ def _nominal_for(path: str) -> NominalRobot:
 
 
 def controller_period(sc: RobotScenario) -> float:
-    """controller.params.T, else the controller's default T."""
+    """controller.params.T if given, else the scenario's control_period."""
     if "T" in sc.controller.params:
         return float(sc.controller.params["T"])
-    named, _ = _S._controller_signature(sc.controller.name)
-    p = named.get("T")
-    if p is not None and p.default is not inspect.Parameter.empty:
-        return float(p.default)
-    from .controllers.station_pid import DEFAULT_T
+    return float(sc.control_period)
 
-    return DEFAULT_T
+
+class _Shifted:
+    """A trajectory translated by a constant offset (world frame)."""
+
+    def __init__(self, base, offset: np.ndarray) -> None:
+        self.base, self.offset = base, np.asarray(offset, dtype=float)
+
+    def position(self, t):
+        return np.asarray(self.base.position(t)) + self.offset
+
+    def velocity(self, t):
+        return self.base.velocity(t)
+
+    def acceleration(self, t):
+        return self.base.acceleration(t)
+
+    @property
+    def duration(self) -> float:
+        return self.base.duration
+
+    @property
+    def has_orientation(self) -> bool:
+        return self.base.has_orientation
+
+    def orientation(self, t):
+        return self.base.orientation(t)
+
+
+def trajectory_of(sc: RobotScenario, tip0: np.ndarray):
+    """The scenario's end-effector trajectory (None: none), shifted to start at ``tip0`` (the
+    initial tip position, world) with trajectory_origin "tip"."""
+    if sc.trajectory is None:
+        return None
+    from .trajectories import make_trajectory
+
+    tr = make_trajectory(sc.trajectory, base_dir=sc.base_dir)
+    if sc.trajectory_origin == "tip":
+        tr = _Shifted(tr, np.asarray(tip0, dtype=float) - np.asarray(tr.position(0.0), dtype=float))
+    return tr
 
 
 def robot_info(sc: RobotScenario, plant: RobotPlant | None = None) -> dict:
@@ -372,7 +429,7 @@ def resolved(sc: RobotScenario) -> dict:
     is in :func:`robot_info`). It is itself a valid scenario describing the same run."""
     d = sc.model_dump(mode="json")
     d["outputs"]["log"] = _S.log_path(sc).as_posix()
-    d["controller"]["params"]["T"] = controller_period(sc)
+    d["controller"]["params"].setdefault("T", controller_period(sc))
     return _S._jsonable(d)
 
 
@@ -398,7 +455,12 @@ def build(sc: RobotScenario) -> tuple[RobotPlant, Any]:
             arm = JointTrajectory.from_waypoints(names, plant.joint_angles,
                                                  [(w.t, {n: k * v for n, v in w.joints.items()})
                                                   for w in sc.arm.waypoints])
-        ctrl = create(sc.controller.name, robot=nominal, arm_trajectory=arm, **sc.controller.params)
+        params = dict(sc.controller.params)
+        params.setdefault("T", float(sc.control_period))
+        named, var_kw = _S._controller_signature(sc.controller.name)
+        if "trajectory" in inspect.signature(_S._factory(sc.controller.name)).parameters or var_kw:
+            params["trajectory"] = trajectory_of(sc, plant.tip_position)
+        ctrl = create(sc.controller.name, robot=nominal, arm_trajectory=arm, **params)
     except (ParameterError, ControllerError, ValueError, TypeError) as exc:
         raise _S.ScenarioError(f"scenario {sc.name!r}: {exc}") from None
     return plant, ctrl
