@@ -233,12 +233,12 @@ def test_one_sample_run_ends_with_status_and_log(cli, tmp_path):
 
 
 def test_a_run_that_raises_ends_with_status_error(cli, tmp_path, monkeypatch):
-    from uvms_mj.controllers import builtin
+    from uvms_mj.controllers import rac
 
     def boom(self, m):
         raise np.linalg.LinAlgError("Singular matrix")
 
-    monkeypatch.setattr(builtin.RAC, "compute", boom)
+    monkeypatch.setattr(rac.RAC, "compute", boom)
     f = _write(tmp_path, {"duration": 0.3, "controller": {"name": "rac"}})
     res = cli("run", f, "--out", tmp_path / "e.mcap")
     _no_traceback(res)
@@ -468,7 +468,7 @@ def test_base_reference_options(tmp_path):
         from uvms_mj.controllers.base import Measurement
 
         ctrl.reset(Measurement(k=0, t=0.0, q=q0 + np.r_[0.01, 0.01, 0, 0, 0], qd=None))
-        refs[ref] = ctrl._x0_ref.copy()
+        refs[ref] = ctrl._ref_pos.copy()
     assert np.allclose(refs["measured"][:2], q0[:2] + 0.01)
     assert np.allclose(refs["truth"], q0[:3]) and np.allclose(refs["nominal"], q0[:3])
     from uvms_mj.scenario import resolved, validate_scenario

@@ -205,7 +205,10 @@ def run_closed_loop(
             q = q_out
         return Measurement(k=k, t=k * T, q=q, qd=qd)
 
+    on_event = getattr(plant, "on_sample", None)  # scheduled plant events (e.g. a payload pick-up)
     for k in range(n):
+        if on_event is not None:
+            on_event(k * T)
         meas = measure(k)
         if k == 0:
             controller.reset(meas)

@@ -45,6 +45,7 @@ __all__ = [
     "OVERRIDE_FIELDS",
     "InitialState",
     "Layout",
+    "Payload",
     "RobotPlant",
     "apply_overrides",
     "compile_robot_spec",
@@ -452,6 +453,63 @@ class InitialState:
                 arr[adrs[j]] = x
 
 
+# --------------------------------------------------------------------------- payload
+
+
+@dataclass(frozen=True)
+class Payload:
+    """A payload picked up during a run: a point mass welded to a site of the robot (the
+    end-effector site by default) whose mass appears at time ``t`` (before: 1e-9 kg).
+
+    The plant adds it as a welded child body ``payload`` of the site's body (MjSpec edit before
+    compiling) and, at the first control sample at or after ``t``, sets its mass and inertia
+    (a solid sphere of ``radius``) in the MjModel and the ancestors' subtree masses: MuJoCo
+    recomputes the mass matrix and gravity from them every step. The payload displaces no water
+    (dense; ``volume`` adds buoyancy at its centre). The controller's nominal model never has it.
+
+    Attributes:
+        mass: [kg] (> 0); t: pick-up time [s] (>= 0); site: the site it is welded to (None: tip);
+        offset: its centre in the site's frame [m]; radius: for its inertia [m]; volume: [m^3].
+    """
+
+    mass: float
+    t: float = 0.0
+    site: str | None = None
+    offset: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    radius: float = 0.02
+    volume: float = 0.0
+
+    def add_to(self, spec: mujoco.MjSpec, site_name: str) -> None:
+        site = spec.site(site_name)
+        if site is None:
+            raise ParameterError(f"payload.site = {site_name!r}: no such site")
+        parent = site.parent
+        R = np.zeros(9)
+        q = np.asarray(site.quat, dtype=float)
+        mujoco.mju_quat2Mat(R, q / np.linalg.norm(q))
+        pos = np.asarray(site.pos, dtype=float) + R.reshape(3, 3) @ np.asarray(self.offset, dtype=float)
+        b = parent.add_body(name="payload", pos=pos)
+        b.mass = 1e-9
+        b.inertia = [1e-12, 1e-12, 1e-12]
+        b.explicitinertial = True
+        if self.volume > 0:
+            b.plugin.plugin_name = "uvms.hydro"
+            b.plugin.active = True
+            b.plugin.config = {"volume": _pm.fmt([self.volume])}
+
+    def apply(self, m: mujoco.MjModel) -> None:
+        """Give the payload body its mass (in the compiled model)."""
+        b = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, "payload")
+        dm = self.mass - float(m.body_mass[b])
+        m.body_mass[b] = self.mass
+        m.body_inertia[b] = 0.4 * self.mass * self.radius ** 2
+        a = b
+        while a > 0:
+            m.body_subtreemass[a] += dm
+            a = int(m.body_parentid[a])
+        m.body_subtreemass[0] += dm
+
+
 # --------------------------------------------------------------------------- plant
 
 
@@ -494,6 +552,7 @@ class RobotPlant(Plant):
         tip_site: str | None = None,
         max_speed: float = 100.0,
         backend: str | None = None,
+        payload: Payload | None = None,
     ) -> None:
         install_mujoco_warning_handler()
         path = robot_path(model)
@@ -521,7 +580,16 @@ class RobotPlant(Plant):
             if terms.buoyancy:
                 words.append("buoyancy")
             _pm.set_water(spec, terms=" ".join(sorted(words)))
+            if payload is not None:
+                site = payload.site or tip_site or next(
+                    (x.name for x in spec.sites if x.name and x.name.endswith("tip")), None)
+                if site is None:
+                    raise ParameterError("payload: the robot has no tip site; give payload.site")
+                payload.add_to(spec, site)
 
+        if payload is not None and not (payload.mass > 0 and payload.t >= 0):
+            raise ParameterError(f"payload = {payload!r}: mass must be > 0 and t >= 0")
+        self.payload = payload
         self.model = compile_robot_spec(path, overrides, native=native, edit=edit)
         self.model_path = path
         m = self.model
@@ -568,9 +636,20 @@ class RobotPlant(Plant):
 
     # ---------------------------------------------------------------- state
 
+    def on_sample(self, t: float) -> None:
+        """Called by the sampled loop at every control sample (time t): scheduled events
+        (the payload's pick-up)."""
+        if self.payload is not None and not self._picked and t >= self.payload.t - 1e-12:
+            self.payload.apply(self.model)
+            self._picked = True
+            mujoco.mj_forward(self.model, self.data)
+
     def reset(self, keyframe: str | None = None) -> None:  # noqa: ARG002 - the initial state decides
         """Reset time, state and actuator states to :attr:`initial`."""
         m, d = self.model, self.data
+        if getattr(self, "_picked", False):
+            raise ParameterError("reset after the payload was picked up: create a new RobotPlant")
+        self._picked = False
         self.initial.apply(m, d, self.layout)
         d.time = 0.0
         self._diverged = None

@@ -175,6 +175,25 @@ class Arm(_Section):
         return self
 
 
+class PayloadSection(_Section):
+    """A payload picked up during the run (:class:`uvms_mj.robot.Payload`), unknown to the
+    nominal model."""
+
+    mass: float = Field(gt=0, le=1000.0, description="[kg]")
+    t: float = Field(0.0, ge=0, le=_S.DURATION_MAX, description="pick-up time [s]")
+    site: str | None = Field(None, description="site it is welded to; null: the tip site")
+    offset: Annotated[list[float], Field(min_length=3, max_length=3)] = Field(
+        default_factory=lambda: [0.0, 0.0, 0.0], description="centre in the site frame [m]")
+    radius: float = Field(0.02, gt=0, le=1.0, description="for its inertia (solid sphere) [m]")
+    volume: float = Field(0.0, ge=0, le=1.0, description="displaced volume [m^3]")
+
+    def payload(self):
+        from .robot import Payload
+
+        return Payload(mass=self.mass, t=self.t, site=self.site, offset=tuple(self.offset), radius=self.radius,
+                       volume=self.volume)
+
+
 class RobotHydro(_Section):
     added_mass: Literal["exact", "off"] = "exact"
     drag: Literal["strip", "off"] = "strip"
@@ -185,6 +204,7 @@ class RobotPlantSection(_Section):
     overrides: dict[str, Any] = Field(default_factory=dict, description="'<element>.<field>': value")
     hydro: RobotHydro = Field(default_factory=RobotHydro)
     gravity: bool = True
+    payload: PayloadSection | None = Field(None, description="a payload picked up during the run")
     current: Annotated[list[Annotated[float, Field(ge=-CURRENT_MAX, le=CURRENT_MAX)]],
                        Field(min_length=3, max_length=3)] | None = Field(None, description="world [vx, vy, vz] m/s")
 
@@ -445,7 +465,8 @@ def build(sc: RobotScenario) -> tuple[RobotPlant, Any]:
             robot_path(sc.robot, sc.base_dir), overrides=pl.overrides,
             terms=HydroTerms(added_mass=pl.hydro.added_mass, drag=pl.hydro.drag, buoyancy=pl.hydro.buoyancy),
             gravity=pl.gravity, current=pl.current, timestep=ph.timestep, integrator=ph.integrator,
-            initial=sc.initial.state(), tip_site=sc.tip_site, backend=None if ph.backend == "auto" else ph.backend)
+            initial=sc.initial.state(), tip_site=sc.tip_site, backend=None if ph.backend == "auto" else ph.backend,
+            payload=pl.payload.payload() if pl.payload is not None else None)
         nominal = NominalRobot(robot_path(sc.robot, sc.base_dir), sc.nominal.overrides, gravity=sc.nominal.gravity,
                                tip_site=sc.tip_site)
         arm = None

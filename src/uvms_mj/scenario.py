@@ -956,6 +956,7 @@ def resolved(scenario: Scenario) -> dict:
     d["outputs"]["log"] = log_path(scenario).as_posix()
     named, _ = _controller_signature(scenario.controller.name)
     params = {k: p.default for k, p in named.items() if p.default is not inspect.Parameter.empty}
+    params.update(getattr(_factory(scenario.controller.name), "PAPER_DEFAULTS", {}))
     params.update(scenario.controller.params)
     if "T" in named or "T" in params:
         params["T"] = controller_period(scenario)
@@ -1029,7 +1030,9 @@ def scenario_warnings(scenario: Scenario) -> list[str]:
     c, s = scenario.controller, scenario.sensors
     if s.delay and c.name in ("rac", "rac_dob"):
         named, _ = _controller_signature(c.name)
-        gains = {k: c.params.get(k, named[k].default if k in named else 0.0) for k in ("gamma", "lam")}
+        robot_defaults = getattr(_factory(c.name), "PAPER_DEFAULTS", {})
+        gains = {k: c.params.get(k, robot_defaults.get(k, named[k].default if k in named else 0.0))
+                 for k in ("gamma", "lam")}
         g = max(float(np.max(np.asarray(v, dtype=float))) for v in gains.values())
         if g > DELAY_GAIN_MARGIN:
             out.append(f"sensors.delay = 1 with controller {c.name!r} and gains up to {g:g} (gamma, lam): "

@@ -177,6 +177,9 @@ class RAC(Controller):
 
     observer = False
     robots = "floating"
+    #: The defaults the paper's robot gets for the parameters whose default depends on the robot
+    #: (what a resolved paper scenario shows).
+    PAPER_DEFAULTS = {"gamma": [0.3, 0.3, 0.2, 0.2, 0.2], "lam": [0.3, 0.3, 0.2, 0.2, 0.2]}
 
     def __init__(
         self,
@@ -204,7 +207,10 @@ class RAC(Controller):
         if robot is None:
             from ..nominal import NominalModel
 
-            robot = nominal_robot_from_params(nominal if nominal is not None else NominalModel())
+            nominal = nominal if nominal is not None else NominalModel()
+            robot = nominal_robot_from_params(nominal)
+        #: the planar parameters the nominal MuJoCo model was made from (paper robot), else None
+        self.nominal = nominal
         if not isinstance(robot, NominalRobot):
             raise ControllerError(f"robot = {robot!r} must be a NominalRobot")
         self.robot = robot

@@ -100,11 +100,16 @@ class StationPID(Controller):
         kp_joints, kd_joints: explicit joint gains (1 or n numbers; N m/rad, N m s/rad).
         integral_limit: anti-windup bound, as a fraction of each axis' largest wrench.
         feedforward: add the nominal hold force (gravity minus buoyancy).
+        trajectory: an end-effector path (world): the arm's joint targets then come from
+            resolved-rate inverse kinematics relative to the station (the vehicle at its reference
+            pose), gain ``ik_gain`` [1/s], damping ``ik_damping`` [m]; otherwise
+            ``arm_trajectory`` (joint waypoints) or the initial angles.
     """
 
     robots = "floating"
 
-    def __init__(self, robot: NominalRobot, arm_trajectory: JointTrajectory | None = None, T: float = DEFAULT_T,
+    def __init__(self, robot: NominalRobot, arm_trajectory: JointTrajectory | None = None, trajectory=None,
+                 T: float = DEFAULT_T, ik_gain: float = 5.0, ik_damping: float = 0.01,
                  bandwidth_base: float = 1.0, bandwidth_attitude: float = 2.0, bandwidth_joints: float = 6.0, damping_ratio: float = 1.0,
                  integral_time: float = 5.0, kp_position=None, kd_position=None, ki_position=None,
                  kp_attitude=None, kd_attitude=None, ki_attitude=None, kp_joints=None, kd_joints=None,
@@ -135,6 +140,11 @@ class StationPID(Controller):
         if arm_trajectory is not None and tuple(arm_trajectory.names) != tuple(lay.joint_names):
             raise ControllerError("arm_trajectory joints differ from the robot's")
         self.arm = arm_trajectory
+        self.trajectory = trajectory
+        if trajectory is not None and lay.tip_site < 0:
+            raise ControllerError("trajectory given but the robot has no end-effector site")
+        self.ik_gain = check_positive("ik_gain", ik_gain)
+        self.ik_damping = check_positive("ik_damping", ik_damping)
         B = robot.allocation()
         self.allocator = Allocator(B, robot.thruster_lo, robot.thruster_hi) if B.shape[1] else None
         # The largest wrench per axis (for anti-windup): |B| times the force limits.
@@ -174,6 +184,25 @@ class StationPID(Controller):
         self.first = True
         # the motors' joints inside the arm-joint list
         self.motor_in_arm = np.array([lay.joint_names.index(j) for j in lay.motor_joints], dtype=int)
+        self.q_ik = self.q_joint0.copy()
+        self.q_station = q.copy()
+
+    def _ik_step(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """Resolved-rate inverse kinematics of the tip path relative to the station (the vehicle
+        at its reference pose, the arm at the IK state): qd = B^T (B B^T + d^2 I)^-1
+        (v_d + K (p_d - p(q_ik))), q_ik += T qd (B: tip Jacobian on the arm joints, nominal model)."""
+        r, lay = self.robot, self.robot.layout
+        qs = self.q_station.copy()
+        qs[lay.joint_qadr] = self.q_ik
+        r._set(qs)
+        jac = r.jacobians()
+        B = jac["tip_p"][:, lay.joint_dadr]
+        p_d = np.asarray(self.trajectory.position(t), dtype=float)[:3]
+        v_d = np.asarray(self.trajectory.velocity(t), dtype=float)[:3]
+        v = v_d + self.ik_gain * (p_d - jac["tip"])
+        qd = B.T @ np.linalg.solve(B @ B.T + self.ik_damping ** 2 * np.eye(3), v)
+        self.q_ik = self.q_ik + self.T * qd
+        return self.q_ik.copy(), qd
 
     def compute(self, measurement: Measurement) -> Command:
         r, lay = self.robot, self.robot.layout
@@ -217,7 +246,9 @@ class StationPID(Controller):
         else:
             thrust, achieved, saturated = np.zeros(0), np.zeros(6), np.zeros(0, dtype=bool)
 
-        if self.arm is not None:
+        if self.trajectory is not None:
+            qj_d, qdj_d = self._ik_step(measurement.t)
+        elif self.arm is not None:
             qj_d, qdj_d = self.arm(measurement.t)
         else:
             qj_d, qdj_d = self.q_joint0, np.zeros(self.nj)
@@ -232,4 +263,6 @@ class StationPID(Controller):
             "wrench_body": wrench, "wrench_achieved": np.asarray(achieved, dtype=float),
             "thrust_saturated": np.asarray(saturated, dtype=bool),
         }
+        if self.trajectory is not None:
+            signals["tip_desired"] = np.asarray(self.trajectory.position(measurement.t), dtype=float)[:3].copy()
         return Command(thrust=np.asarray(thrust, dtype=float), torques=tau, signals=signals)
