@@ -415,8 +415,11 @@ def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str
     results, logs, failed, status, runs = {}, {}, [], {}, {}
     _check_dir(out_dir)
     base = _load(scenario, sets)
+    # Every controller's scenario is checked before any runs (its own parameters: the
+    # scenario's controllers.<name>, or controller.params for the file's controller, or defaults).
+    scs = {name: _load(scenario, tuple(sets) + (f"controller.name={name}",)) for name in names}
     for name in names:
-        sc = _load(scenario, tuple(sets) + (f"controller.name={name}",))
+        sc = scs[name]
         path = Path(out_dir) / f"{sc.name}-{name}.mcap"
         res, path, m = _run_one(sc, path, source=scenario)
         results[name], logs[name], status[name] = m, path, res.status

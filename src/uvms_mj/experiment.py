@@ -106,8 +106,19 @@ def metrics(result: RunResult) -> dict[str, float]:
         return robot_metrics(result)
     needed = ("p_desired", "q_true", "tip_true", "thrust_force", "torques")
     if any(k not in s or len(s[k]) == 0 for k in needed):
-        # A run that stopped before its first sample (or a log without these signals): no metrics.
-        return {k: float("nan") for k in METRIC_KEYS}
+        # A run that stopped before its first sample, or a controller that does not log its
+        # desired task (p_desired is optional for plug-ins): the metrics its signals allow.
+        out = {k: float("nan") for k in METRIC_KEYS}
+        rms_ = lambda x: float(np.sqrt(np.mean(np.square(x))))  # noqa: E731
+        if len(s.get("thrust_force", ())):
+            out["thrust_rms_N"] = rms_(s["thrust_force"])
+        if len(s.get("torques", ())):
+            out["torque_rms_Nm"] = rms_(s["torques"])
+        if len(s.get("thrust_force", ())):
+            sat = s.get("thrust_saturated")
+            out["saturated_s"] = (float(np.any(sat, axis=1).sum() * result.meta.get("T", 1 / 60))
+                                  if sat is not None and len(sat) else 0.0)
+        return out
     pd = s["p_desired"]
     q = s["q_true"]
     base = np.linalg.norm(pd[:, :2] - q[:, :2], axis=1)

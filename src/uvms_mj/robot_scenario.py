@@ -263,6 +263,7 @@ class RobotScenario(_Section):
                                   "the timestep)")
     sensors: _S.Sensors = Field(default_factory=_S.Sensors)
     controller: RobotController = Field(default_factory=RobotController)
+    controllers: dict[str, dict[str, Any]] = Field(default_factory=dict, description="per-controller parameters")
     warm_start: bool = True
     outputs: _S.Outputs = Field(default_factory=_S.Outputs)
 
@@ -322,6 +323,20 @@ class RobotScenario(_Section):
         if self.arm.waypoints and not names:
             issues.append((("arm",), f"robot {self.robot!r} has no arm joints", _NO_VALUE))
         # controller: registered, for floating robots, its parameters valid
+        for name, params in self.controllers.items():
+            if name not in floating_controllers():
+                issues.append((("controllers", name), f"not a controller for floating robots{_suggest(name, floating_controllers())}; "
+                               f"for floating robots: {', '.join(floating_controllers())}", _NO_VALUE))
+            elif not isinstance(params, dict):
+                issues.append((("controllers", name), "must be a mapping of parameter names to values", params))
+            else:
+                found = _check_params(name, params) or _try_create(name, params, path)
+                issues += [(("controllers", name) + (sub[2:] if sub[:2] == ("controller", "params") else sub), msg, v)
+                           for sub, msg, v in found]
+        try:
+            _S._take_controller_params(self)
+        except _Issues as exc:
+            issues += exc.items
         c = self.controller
         allowed = floating_controllers()
         if c.name not in available():

@@ -74,6 +74,11 @@ Errors (:class:`ScenarioError`, a ValueError) name the file, the field path (e.g
 ``controller.params.gamma``), the bad value and what is allowed, one line per problem; unknown
 keys come with a did-you-mean suggestion; YAML syntax errors with line and column.
 
+``controller.params`` belong to ``controller.name``; ``controllers: {name: params, ...}`` gives
+any controller its own parameters (used by ``compare`` and by ``--set controller.name=...``:
+a controller named on the command line gets ``controllers[name]``, else its defaults, never the
+file controller's parameters).
+
 Overrides from the command line (``sets``) are ``key.path=value`` strings, the value parsed as
 YAML (``controller.name=rac``, ``trajectory.displacement=[0.2,0]``, ``plant.current=[0.1,0]``,
 ``plant.overrides.base.volume=0.03``: inside ``overrides`` the rest of the path is one key). They
@@ -592,11 +597,32 @@ class Scenario(_Section):
     sensors: Sensors = Field(default_factory=Sensors)
     controller: ControllerSection = Field(default_factory=ControllerSection)
     trajectory: Trajectory = Field(default_factory=Trajectory)
+    controllers: dict[str, dict[str, Any]] = Field(
+        default_factory=dict, description="per-controller parameters for compare / --set controller.name: "
+        "name -> params (controller.params belong to controller.name)")
     warm_start: bool = Field(True, description="thrusters start at the first command (holding station)")
     outputs: Outputs = Field(default_factory=Outputs)
 
+    @field_validator("controllers")
+    @classmethod
+    def _controllers(cls, v: dict) -> dict:
+        issues = []
+        names = available()
+        for name, params in v.items():
+            if name not in names:
+                issues.append(((name,), f"unknown controller{_suggest(name, names)}; registered: {', '.join(names)}",
+                               _NO_VALUE))
+            elif not isinstance(params, dict):
+                issues.append(((name,), "must be a mapping of parameter names to values", params))
+            else:
+                issues += [((name,) + p, m, x) for p, m, x in _check_controller_params(name, params)]
+        if issues:
+            raise _Issues(issues)
+        return v
+
     @model_validator(mode="after")
     def _period(self) -> "Scenario":
+        _take_controller_params(self)
         T = controller_period(self)
         dt = self.physics.timestep
         if not (math.isfinite(T) and PERIOD_RANGE[0] <= T <= PERIOD_RANGE[1]):
@@ -616,6 +642,20 @@ class Scenario(_Section):
                             f"{dt:.6g} s: the lag integrates stably only for tau > timestep / {bound} = "
                             f"{dt / bound:.6g} s", tau)])
         return self
+
+
+def _take_controller_params(sc) -> None:
+    """controller.params from ``controllers[controller.name]`` when only the latter is given;
+    both given and different is an error."""
+    own = sc.controllers.get(sc.controller.name)
+    if own is None:
+        return
+    if not sc.controller.params:
+        sc.controller.params = copy.deepcopy(own)
+    elif sc.controller.params != own:
+        raise _Issues([(("controller", "params"), f"parameters of {sc.controller.name!r} are given both here and in "
+                        f"controllers.{sc.controller.name} (differently); give them in one place",
+                        sc.controller.params)])
 
 
 # --------------------------------------------------------------------------- validation, loading
@@ -826,6 +866,12 @@ def apply_sets(raw: dict, sets: Sequence[str]) -> dict:
     return out
 
 
+def _controller_name(raw: dict) -> Any:
+    c = raw.get("controller")
+    default = "station_pid" if raw.get("robot", "paper") != "paper" else "rac_dob"
+    return c.get("name", default) if isinstance(c, dict) else default
+
+
 def load_scenario(path: str | Path, sets: Sequence[str] = ()) -> Scenario:
     """Load and validate a scenario file, with ``key.path=value`` overrides applied first.
 
@@ -855,8 +901,16 @@ def load_scenario(path: str | Path, sets: Sequence[str] = ()) -> Scenario:
     if not isinstance(raw, dict):
         raise ScenarioError(f"{source}: a scenario must be a mapping of keys to values, got {_fmt_value(raw)}")
     if sets:
+        before = _controller_name(raw)
         raw = apply_sets(raw, sets)
         source = f"{source} (with --set {' '.join(sets)})"
+        after = _controller_name(raw)
+        touched = any(str(x).partition("=")[0].strip().startswith("controller.params") for x in sets)
+        if after != before and not touched and isinstance(raw.get("controller"), dict):
+            # controller.params belong to the file's controller: another controller gets its own
+            # parameters from the controllers section, else its defaults.
+            own = raw.get("controllers", {}).get(after) if isinstance(raw.get("controllers"), dict) else None
+            raw["controller"]["params"] = copy.deepcopy(own) if own is not None else {}
     if "name" not in raw:
         raw = {"name": re.sub(r"[^A-Za-z0-9_.-]", "_", p.stem) or "scenario", **raw}
     return validate_scenario(raw, source, base_dir=p.parent)

@@ -120,7 +120,13 @@ def create(name: str, **kwargs: Any) -> Controller:
         if ep is None:
             raise ControllerError(f"unknown controller {name!r}; registered: {', '.join(available())}")
         factory = ep.load()
-    return factory(**kwargs)
+    ctrl = factory(**kwargs)
+    if not getattr(ctrl, "name", ""):
+        try:  # the registry name goes into every log (a plug-in need not set it)
+            ctrl.name = name
+        except (AttributeError, TypeError):
+            pass
+    return ctrl
 
 
 # ------------------------------------------------------------------ parameter checks
