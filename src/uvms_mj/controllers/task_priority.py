@@ -377,7 +377,7 @@ class TaskPriority(Controller):
         return out
 
     def compute(self, measurement: Measurement) -> Command:
-        r, lay, d, T = self.robot, self.robot.layout, self.d, self.T
+        r, d, T = self.robot, self.d, self.T
         model = r.model
         q = np.asarray(measurement.q, dtype=float).copy()
         zeta = self._measured_velocity(measurement, q)
