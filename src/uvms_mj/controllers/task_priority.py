@@ -58,20 +58,34 @@ so well-conditioned directions are inverted exactly and the solution stays bound
 (2 dls_damping) per unit task velocity) through a singularity.
 
 Low-level loop (Antonelli ch. 9, "kinematic control" with a dynamic low-level velocity
-controller; the vehicle/joint PI velocity loops of ch. 7): the reference is integrated, q_r(k+1)
-= q_r(k) (+) T zeta_r(k) (``mj_integratePos``, q_r(0) = q(0)), and every dof tracks it with a PD
-on the reference (= a PI on the velocity error zeta_r - zeta):
+controller; the vehicle's and joints' PI velocity loops of its dynamic-control chapters): the
+reference is integrated, q_r(k+1) = q_r(k) (+) T zeta_r(k) (``mj_integratePos``, q_r(0) =
+q(0)), and every dof tracks it with a PD on the reference (= a PI on the velocity error
+zeta_r - zeta):
 
     u = Kp (q_r (-) q) + Kd (zeta_r - zeta) + h(q)
 
 (q_r (-) q: ``mj_differentiatePos``, in qvel coordinates; h(q): the nominal hold force, gravity
-minus buoyancy, Antonelli ch. 7 "gravity compensation"). The lead q_r (-) q is clamped to
-``reference_lead_limit`` per dof (anti-windup: q_r is pulled back along). Vehicle rows of u:
-world force and body moment (MuJoCo's free-joint dofs), sent as the body wrench [R^T F; M] to
-the saturating allocator :class:`uvms_mj.thrusters.Allocator`; joint rows clipped to the motors'
-ranges. Gains, unless given, from the nominal mass matrix M at the initial state: Kp_i = M_ii
-w_i^2, Kd_i = 2 damping_ratio w_i M_ii (a critically damped second-order loop per dof, as
-``station_pid``), w_i = ``bandwidth_base`` / ``bandwidth_attitude`` / ``bandwidth_joints``.
+minus buoyancy, the restoring-force compensation of Antonelli's dynamic control). The lead
+q_r (-) q is clamped to ``reference_lead_limit`` per dof (anti-windup: q_r is pulled back
+along). Vehicle rows of u: world force and body moment (MuJoCo's free-joint dofs), sent as the
+body wrench [R^T F; M] to the saturating allocator :class:`uvms_mj.thrusters.Allocator`; joint
+rows clipped to the motors' ranges. Gains, unless given, from the nominal mass matrix M at the
+initial state: Kp_i = M_ii w_i^2, Kd_i = 2 damping_ratio w_i M_ii (a critically damped
+second-order loop per dof, as ``station_pid``), w_i = ``bandwidth_base`` /
+``bandwidth_attitude`` / ``bandwidth_joints``.
+
+Defaults. A cascade: the kinematic (outer) gains, 1/s on the tip and the attitude and 0.5/s on
+task 3, sit below the low-level (inner) bandwidths, 2 rad/s on the vehicle's translation,
+3 rad/s on its rotation, 10 rad/s on the joints (station_pid's 1, 2, 6 raised: here the loops
+track a moving reference instead of holding a fixed one); every kinematic gain must satisfy
+gain T < 1 (the sampled CLIK error e(k+1) = (1 - gain T) e(k) then decays monotonically).
+dls_threshold 0.01 and dls_damping 0.05 (Jacobian units): the damping starts where the arm's
+tip Jacobian loses two orders of magnitude against its usual 0.1 - 0.3 m/rad; rank_tol 1e-10.
+
+References are to chapter and topic; the book's equation numbers were not checked against a
+copy (the forms are the standard ones of the cited papers: Nakamura, Hanafusa & Yoshikawa 1987;
+Siciliano & Slotine 1991; Chiaverini 1997).
 
 Velocities: ``measurement.qd`` when there is a velocity sensor, else backward differences of the
 measured poses (``mj_differentiatePos`` on the nominal model; zero at the first sample).
@@ -183,7 +197,10 @@ def task_priority_velocity(tasks: Sequence[tuple[np.ndarray, np.ndarray]], form:
 def _vector(name: str, value: Any, size: int) -> np.ndarray | None:
     if value is None:
         return None
-    arr = np.atleast_1d(np.asarray(value, dtype=float))
+    try:
+        arr = np.atleast_1d(np.asarray(value, dtype=float))
+    except (TypeError, ValueError):
+        raise ControllerError(f"{name} = {value!r} must be 1 or {size} finite numbers >= 0") from None
     if arr.size == 1:
         arr = np.full(size, float(arr[0]))
     if arr.shape != (size,) or not np.all(np.isfinite(arr)) or np.any(arr < 0):
@@ -304,8 +321,9 @@ class TaskPriority(Controller):
     # ------------------------------------------------------------------ pieces
 
     def tasks(self, t: float, q: np.ndarray, jac: dict) -> tuple[list[tuple[np.ndarray, np.ndarray]], dict]:
-        """The prioritised tasks [(J_i, v_i)] (3, or 4 with posture_level "below_position") at time t for the measured q (with the
-        nominal model's ``jacobians()`` at q), and their errors (module docstring)."""
+        """The prioritised tasks [(J_i, v_i)] (3, or 4 with posture_level "below_position") at
+        time t for the measured q (with the nominal model's ``jacobians()`` at q), and their
+        errors (module docstring)."""
         lay, nv = self.robot.layout, self.robot.model.nv
         a = lay.base_qadr
         p_d, v_d = self._tip_desired(t)
