@@ -2,8 +2,8 @@
 
 The kinematic control of an underwater vehicle-manipulator system of Antonelli, *Underwater
 Robots*, 4th ed., Springer 2018, ch. 9 ("Kinematic control": task-priority inverse kinematics,
-after Nakamura, Siciliano & Slotine 1991 and Chiaverini 1997), for any floating robot with an
-arm (``robots = "floating"``), on the controller's own nominal MuJoCo model
+after Nakamura, Hanafusa & Yoshikawa 1987, Siciliano & Slotine 1991 and Chiaverini 1997), for
+any floating robot with an arm (``robots = "floating"``), on the controller's own nominal MuJoCo model
 (:class:`uvms_mj.nominal_robot.NominalRobot`).
 
 Frames and units. Generalized velocities zeta are MuJoCo's qvel (Antonelli's zeta = [nu; q_dot]
@@ -18,7 +18,9 @@ Tasks, highest priority first (Antonelli ch. 9, "task-priority inverse kinematic
 2. vehicle attitude, error sigma~_2 = log(R_d R^T) (rotation vector, WORLD axes, as ``rac``),
    J_2 = the vehicle's world angular-velocity rows (= [0 R 0]);
 3. vehicle position p_v (world, 3) and arm posture q (n joints), stacked, J_3 = [J_pv; 0 S],
-   the posture rows scaled by ``posture_weight`` (a row weight in the task-3 least squares).
+   the posture rows scaled by ``posture_weight`` (a row weight in the task-3 least squares);
+   with ``posture_level = "below_position"`` the posture is a 4th level of its own, below the
+   vehicle position.
 
 Each task's reference velocity is the closed-loop inverse kinematics (CLIK) one (Antonelli ch. 9,
 "kinematic control", sigma_dot_r = sigma_dot_d + Lambda sigma~), on the MEASURED task values:
@@ -53,8 +55,7 @@ per singular value: A^# = V diag(s_i / (s_i^2 + lambda_i^2)) U^T with
     lambda_i^2 = dls_damping^2 (1 - (s_i / dls_threshold)^2)   if s_i < dls_threshold, else 0
 
 (s_i in the Jacobian's own units: 1 for the vehicle's translation, m for the tip per joint rad;
-s_i <= ``rank_tol`` s_max are exact zeros, inverted as 0),
-so well-conditioned directions are inverted exactly and the solution stays bounded (<= 1 /
+s_i <= ``rank_tol`` s_max are exact zeros, inverted as 0), so well-conditioned directions are inverted exactly and the solution stays bounded (<= 1 /
 (2 dls_damping) per unit task velocity) through a singularity.
 
 Low-level loop (Antonelli ch. 9, "kinematic control" with a dynamic low-level velocity
