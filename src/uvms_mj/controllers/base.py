@@ -101,7 +101,7 @@ def _entry_points() -> dict[str, metadata.EntryPoint]:
 
 def available() -> list[str]:
     """Names of the built-in and installed (entry-point) controllers."""
-    from . import builtin, rac, station_pid  # noqa: F401  (registers the built-ins)
+    from . import builtin, rac, station_pid, task_priority  # noqa: F401  (registers the built-ins)
 
     return sorted(set(_REGISTRY) | set(_entry_points()))
 
@@ -112,7 +112,7 @@ def create(name: str, **kwargs: Any) -> Controller:
     Raises:
         ControllerError: unknown name (the message lists the registered controllers).
     """
-    from . import builtin, rac, station_pid  # noqa: F401
+    from . import builtin, rac, station_pid, task_priority  # noqa: F401
 
     factory = _REGISTRY.get(name)
     if factory is None:
