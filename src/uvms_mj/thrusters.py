@@ -329,6 +329,13 @@ class Allocator:
         self.tol = float(tol)
         self._redundant = np.linalg.matrix_rank(self.Bs) < n
         self._norm = float(np.linalg.norm(self.Bs, 2))
+        # Fast path (every thruster free, the usual case): the first pass of step 2 with all
+        # thrusters free is u = P t, P the minimum-norm least-squares operator (the same SVD
+        # cut-off as _solve_free); when u is inside the box it is the answer (g = 0).
+        A = self.Bs if self.eps == 0 else np.vstack([self.Bs, np.sqrt(self.eps) * np.eye(n)])
+        P = np.linalg.pinv(A, rcond=1e-12)
+        self._P_free = P[:, :k] if self.eps > 0 else P
+        self._any_equal = bool(np.any(lo == hi))
 
     # -------------------------------------------------------------- pieces
 
@@ -409,6 +416,13 @@ class Allocator:
         if tau.shape != (k,):
             raise ValueError(f"tau = {tau.tolist()}: expected {k} values (the controlled rows)")
         t = self.S @ tau
+        if not self._any_equal:
+            u = self._P_free @ t
+            if np.all(u <= self.hi) and np.all(u >= self.lo):
+                wrench = self.Bc @ u
+                return AllocationResult(thrust=u, saturated=np.zeros(u.size, bool), wrench=wrench,
+                                        residual=tau - wrench, full_wrench=self.B @ u, cost=self._cost(u, t),
+                                        method="redistribution", iterations=1)
         u, passes = self._redistribute(self.Bs, t)
         method = "redistribution"
         if not self._kkt_ok(u, t):
@@ -479,6 +493,27 @@ class Allocator:
 # ---------------------------------------------------------------------------- thrust curves
 
 
+def _horner(coeffs, u: np.ndarray) -> np.ndarray:
+    """c0 + c1 u + ... + cn u^n (Horner; faster than numpy.polynomial's polyval on small arrays).
+    An odd or even polynomial (every other coefficient zero, as the T200 curve and its
+    derivative) is evaluated in u^2, half the operations."""
+    coeffs = tuple(float(c) for c in coeffs)
+    u = np.asarray(u, dtype=float)
+    if len(coeffs) > 2:
+        if not any(coeffs[0::2]):  # odd: u P(u^2)
+            return u * _horner_plain(coeffs[1::2], u * u)
+        if not any(coeffs[1::2]):  # even: P(u^2)
+            return _horner_plain(coeffs[0::2], u * u)
+    return _horner_plain(coeffs, u)
+
+
+def _horner_plain(coeffs: tuple, u: np.ndarray) -> np.ndarray:
+    y = np.full(np.shape(u), coeffs[-1])
+    for c in coeffs[-2::-1]:
+        y = y * u + c
+    return y
+
+
 @dataclass(frozen=True)
 class ThrustCurve:
     """A ``uvms.thruster`` thrust curve F(u) [N] of the command u (docs/hydrodynamics.md).
@@ -528,7 +563,7 @@ class ThrustCurve:
     def __call__(self, u) -> np.ndarray:
         u = np.asarray(u, dtype=float)
         if self.kind == "poly":
-            return np.polynomial.polynomial.polyval(u, self.coeffs)
+            return _horner(self.coeffs, u)
         return np.interp(u, self.u, self.F)
 
     def derivative(self, u) -> np.ndarray:
@@ -780,9 +815,9 @@ class CurveInverse:
             return np.clip((F - c0) / c1, min(a, b), max(a, b))
         Fc = np.clip(F, self.F[0], self.F[-1])
         u = np.interp(Fc, self.F, self.u)
-        pv = np.polynomial.polynomial.polyval
+        der, coeffs = tuple(self.der), self.curve.coeffs
         for _ in range(self.newton):
-            d = pv(u, self.der)
-            step = np.where(d != 0, (pv(u, self.curve.coeffs) - Fc) / np.where(d != 0, d, 1.0), 0.0)
+            d = _horner(der, u)
+            step = np.where(d != 0, (_horner(coeffs, u) - Fc) / np.where(d != 0, d, 1.0), 0.0)
             u = np.clip(u - step, self.a, self.b)
         return u

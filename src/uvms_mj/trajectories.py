@@ -33,6 +33,7 @@ The minimum-jerk profile used throughout (rest-to-rest in unit time, tau in [0, 
 
 from __future__ import annotations
 
+import bisect
 import csv
 import difflib
 import math
@@ -378,7 +379,26 @@ class Waypoints(Trajectory):
     def duration(self) -> float:
         return float(self.knots[-1])
 
+    def _eval_scalar(self, t: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """:meth:`_eval` for one time (the controllers' per-sample call; same formulas)."""
+        knots, P = self.knots, self._P
+        z = np.zeros(3)
+        if t < knots[0]:
+            return P[0].copy(), z, z.copy()
+        if t >= knots[-1]:
+            return P[-1].copy(), z, z.copy()
+        i = min(bisect.bisect_right(knots, t) - 1, len(self._durs) - 1)
+        T = float(self._durs[i])
+        x = min(max((t - knots[i]) / T, 0.0), 1.0)
+        s = x ** 3 * (10.0 + x * (-15.0 + 6.0 * x))
+        ds = 30.0 * x ** 2 * (1.0 + x * (-2.0 + x))
+        dds = 60.0 * x * (1.0 + x * (-3.0 + 2.0 * x))
+        dP = P[i + 1] - P[i]
+        return P[i] + dP * s, dP * (ds / T), dP * (dds / T ** 2)
+
     def _eval(self, t: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        if isinstance(t, (float, int)) and not isinstance(t, bool):
+            return self._eval_scalar(float(t))
         t = np.asarray(t, dtype=float)
         n = len(self._durs)
         i = np.clip(np.searchsorted(self.knots, t, side="right") - 1, 0, n - 1)

@@ -389,7 +389,13 @@ class RAC(Controller):
             self._ref_R = quat_to_mat(ref[3:7])
         else:
             self._ref_pos = (q[self.base_qpos] if self.base_reference is None else self.base_reference).astype(float).copy()
-        self.q_rest = q[[int(r.model.jnt_qposadr[r.model.dof_jntid[d]]) for d in self.arm_dofs]].copy()
+        self.arm_qadr = np.array([int(r.model.jnt_qposadr[r.model.dof_jntid[d]]) for d in self.arm_dofs], dtype=int)
+        self.q_rest = q[self.arm_qadr].copy()
+        b, a = self.base_dofs, self.arm_dofs
+        self._ix = {"bb": np.ix_(b, b), "ba": np.ix_(b, a), "ab": np.ix_(a, b), "aa": np.ix_(a, a)}
+        pos = {int(d): i for i, d in enumerate(a)}
+        self._motor_idx = np.array([pos[int(d)] for d in r.motor_dofs], dtype=int)
+        self._Jb_key = None
         self.singular = _Singular(self.js, self.js_high, self.n_ramp, self._v_event,
                                   3 if self.free else self.lin.size)
         self._base_offset = {m.k: np.zeros(3 if self.free else self.lin.size)}
@@ -451,8 +457,12 @@ class RAC(Controller):
         if not first:
             rhs -= (J - self._J_prev) @ qd / T
         qdd_d = np.zeros(r.model.nv)
-        S = J[:nbt][:, b]
-        qdd_d[b] = np.linalg.solve(S, rhs[:nbt]) if S.shape[0] == S.shape[1] else np.linalg.lstsq(S, rhs[:nbt], rcond=None)[0]
+        if self.free:  # S = [[I, 0], [0, R]]: its inverse in closed form
+            qdd_d[b[:3]] = rhs[:3]
+            qdd_d[b[3:]] = jac["R_base"].T @ rhs[3:6]
+        else:
+            S = J[:nbt][:, b]
+            qdd_d[b] = np.linalg.solve(S, rhs[:nbt])
         r_m = rhs[nbt:] - J[nbt:][:, b] @ qdd_d[b]
         dls = manip < self.dls_threshold
         mu2 = self.dls_damping ** 2 * (1.0 - (manip / self.dls_threshold) ** 2) if dls else 0.0
@@ -462,16 +472,19 @@ class RAC(Controller):
             else:
                 qdd_d[a] = np.linalg.solve(Bm, r_m)
         else:
-            W_inv = np.linalg.inv(M[np.ix_(a, a)])
-            G = Bm @ W_inv @ Bm.T + mu2 * np.eye(Bm.shape[0])
-            Bp = W_inv @ Bm.T @ np.linalg.inv(G)
-            qa = q[[int(r.model.jnt_qposadr[r.model.dof_jntid[d]]) for d in a]]
-            q0dd = self.null_kp * (self.q_rest - qa) - self.null_kd * qd[a]
-            qdd_d[a] = Bp @ r_m + (np.eye(a.size) - Bp @ Bm) @ q0dd
+            ix = self._ix
+            X = np.linalg.solve(M[ix["aa"]], Bm.T)  # W^-1 B^T, W = M_MM
+            G = Bm @ X
+            if mu2:
+                G = G + mu2 * np.eye(G.shape[0])
+            Bp = X @ np.linalg.inv(G)
+            q0dd = self.null_kp * (self.q_rest - q[self.arm_qadr]) - self.null_kd * qd[a]
+            qdd_d[a] = Bp @ r_m + q0dd - Bp @ (Bm @ q0dd)
 
         # Computed torque on the nominal model (Eq. 7 blocks), Eqs. 13 and 15.
-        M_BB, M_BM = M[np.ix_(b, b)], M[np.ix_(b, a)]
-        M_MB, M_MM = M[np.ix_(a, b)], M[np.ix_(a, a)]
+        ix = self._ix
+        M_BB, M_BM = M[ix["bb"]], M[ix["ba"]]
+        M_MB, M_MM = M[ix["ab"]], M[ix["aa"]]
         u_M = M_MB @ qdd_d[b] + M_MM @ qdd_d[a] + h[a]
         f_t = M_BM @ qdd_d[a] + h[b]  # Eq. 13
         f_e_hat = self.filter.output() - self.g * M_BB @ qd[b] if self.observer else np.zeros(b.size)
@@ -484,10 +497,7 @@ class RAC(Controller):
 
         self._pd_prev, self._e_p_prev = p_d, e_p
         self._q_prev, self._p_prev, self._J_prev = q, p, J
-        # joint torques for the motors' joints (in the motors' order)
-        motor_dofs = r.motor_dofs
-        pos = {int(d): i for i, d in enumerate(a)}
-        torques = np.array([u_M[pos[int(d)]] for d in motor_dofs])
+        torques = u_M[self._motor_idx]  # joint torques for the motors' joints (in the motors' order)
         signals = {"e_p": e_p, "e_v": e_v, "v_desired": v_d, "a_desired": a_d, "qdd_desired": qdd_d,
                    "u_B": u_B, "u_B_applied": u_applied, "f_E_hat": f_e_hat, "manipulability": manip,
                    "singular_phase": self.singular.phase, "dls_active": dls, "thrust_saturated": saturated}
@@ -502,7 +512,13 @@ class RAC(Controller):
     def _allocate(self, u_B: np.ndarray, jac: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Generalized base force -> thrusts; returns (thrust, saturated, achieved base force)."""
         Jb = self._base_jac(jac)  # u_B = Jb^T w (w: world wrench at the vehicle origin)
-        w = np.linalg.pinv(Jb.T) @ u_B if not self.free else np.concatenate((u_B[:3], jac["R_base"] @ u_B[3:]))
+        if self.free:
+            w = np.concatenate((u_B[:3], jac["R_base"] @ u_B[3:]))
+        else:
+            key = Jb.tobytes()
+            if key != self._Jb_key:  # constant for the paper's base (slides, then a hinge at the origin)
+                self._Jb_key, self._Jb_pinvT = key, np.linalg.pinv(Jb.T)
+            w = self._Jb_pinvT @ u_B
         R = jac["R_base"]
         body = np.concatenate((R.T @ w[:3], R.T @ w[3:]))
         if self.allocator is not None:
