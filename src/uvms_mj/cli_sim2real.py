@@ -112,9 +112,10 @@ def scores_table(scores: dict, title: str = "") -> tuple[str, dict]:
     out.append(f"{'mean':<11} {mean['rms_roll']:8.2f} {mean['rms_pitch']:9.2f} {_fmt(mean['mean_abs_lag'], '7.2f'):>7}"
                f" {mean['rms_roll_lag']:8.2f} {mean['rms_pitch_lag']:9.2f} {_fmt(mean['rms_change_err_roll'], '10.2f'):>10}"
                f" {_fmt(mean['rms_change_err_pitch'], '11.2f'):>11} {mean['max_tracking_deg']:6.3f}")
-    out.append("(degrees; lag: best constant lag of the IMU behind the simulation within the window, '-' for a still "
-               "arm; d_* err: simulated - measured settled attitude change over an arm move (largest); "
-               "track: max arm tracking error)")
+    out.append("(degrees; lag: the best constant lag of the IMU behind the simulation within +-2 s, '-' for a still "
+               "arm; roll/pitch@lag: RMS after removing it;\n d_* err: simulated - measured settled attitude change "
+               "over an arm move (the largest); track: max arm tracking error;\n mean row: means over the trials, "
+               "lag: mean |lag|, d_* err: RMS over all moves, track: the max)")
     return "\n".join(out), mean
 
 
@@ -163,7 +164,9 @@ def _cfg(dt: float | None, neutral: bool):
 @click.option("--as-is", "as_is", is_flag=True, default=False,
               help="Keep the model's mass as written (default: made neutrally buoyant through the vehicle mass).")
 @click.option("--jobs", type=int, default=None, help="Worker processes (default: min(2, CPUs)).")
-def sim2real(data_dir, trial_names, model, overrides, json_out, plots_dir, dt, as_is, jobs) -> None:
+@click.option("--plot-nominal", is_flag=True, default=False,
+              help="With --overrides and --plots: also draw the model without the overrides (dashed).")
+def sim2real(data_dir, trial_names, model, overrides, json_out, plots_dir, dt, as_is, jobs, plot_nominal) -> None:
     """Replay the pool trials of DATA_DIR in the model (arm motion imposed, thrusters off, measured
     initial attitude and velocity) and compare simulated roll and pitch with the IMU."""
     from .cli import _json_dest
@@ -195,8 +198,12 @@ def sim2real(data_dir, trial_names, model, overrides, json_out, plots_dir, dt, a
     if plots is not None:
         try:
             plots.mkdir(parents=True, exist_ok=True)
+            nominal = run_trials(list(ts), model, {}, cfg, jobs) if (plot_nominal and over) else {}
             for n, (sim, sc) in sorted(res.items()):
-                plot_trial(ts[n], sim, sc, plots / f"sim2real_{n}.png")
+                others = [(f"nominal model (RMS {nominal[n][1].rms_roll:.2f} / {nominal[n][1].rms_pitch:.2f} deg)",
+                           nominal[n][0])] if n in nominal else []
+                plot_trial(ts[n], sim, sc, plots / f"sim2real_{n}.png", label="with overrides" if over else "simulated",
+                           others=others)
         except OSError as exc:
             from .cli import _io_error
 
@@ -217,7 +224,7 @@ def sim2real(data_dir, trial_names, model, overrides, json_out, plots_dir, dt, a
               help="K-fold cross-validation instead of --fit/--score: each fold scored by a fit on the others.")
 @click.option("--trials", "trial_names", default=None, metavar="A,B,...", help="Restrict to these trials (with --cv).")
 @click.option("--params", "param_names", default=None, metavar="P,Q,...",
-              help="Parameters to fit (default: cob_x,cob_y,cob_z,arm_volume_scale,roll_damping,pitch_damping).")
+              help="Parameters to fit (default: cob_x,cob_y,cob_z,roll_damping,pitch_damping).")
 @click.option("--model", default="hinsdale2023", show_default=True, help="Model name in models/ or an MJCF file.")
 @click.option("--overrides", default=None, type=click.Path(), metavar="FILE", help="Start from these overrides.")
 @click.option("-o", "--out", "out", type=click.Path(dir_okay=False), default="identified.yaml", show_default=True,

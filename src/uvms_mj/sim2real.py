@@ -47,12 +47,12 @@ from __future__ import annotations
 import math
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any, Mapping, Sequence
 
 import mujoco
 import numpy as np
 
-from .trials import DEFAULT_CUTOFF_HZ, DEFAULT_FILTER_ORDER, JOINT_NAMES, Trial, lowpass, roll_pitch_yaw, uniform_grid
+from .trials import DEFAULT_CUTOFF_HZ, DEFAULT_FILTER_ORDER, JOINT_NAMES, Trial, lowpass, roll_pitch_yaw
 
 __all__ = [
     "DEFAULT_MODEL",
@@ -288,7 +288,7 @@ def joint_reference(trial: Trial, cfg: SimConfig = SimConfig()):
     from scipy.interpolate import CubicSpline
 
     t, q = trial.joints.resampled(cfg.joint_dt)
-    if len(t) > 3 * (cfg.filter_order + 1) * 3:
+    if len(t) > 9 * (cfg.filter_order + 1):  # filtfilt needs more than its padding (3 (order + 1))
         q = lowpass(q, cfg.joint_dt, cfg.cutoff_hz, cfg.filter_order)
     return t, q, CubicSpline(t, q, axis=0, bc_type="natural")
 
@@ -428,7 +428,7 @@ def best_lag(t_meas: np.ndarray, meas: Sequence[np.ndarray], t_sim: np.ndarray, 
     b = float(grid[int(np.argmin(c))])
     fine = np.arange(max(-window, b - step), min(window, b + step) + 1e-4, 0.001)
     cf = np.array([cost(x) for x in fine])
-    lag = float(fine[int(np.argmin(cf))])
+    lag = round(float(fine[int(np.argmin(cf))]), 3)
     e, _ = _shifted_err(t_meas, meas, t_sim, sim, lag)
     return lag, [rms(x) for x in e]
 
@@ -558,8 +558,9 @@ def score_trial(trial: Trial, sim: SimResult, cfg: SimConfig = SimConfig()) -> T
 
 
 def plot_trial(trial: Trial, sim: SimResult, score: TrialScore | None, path: str | Path, title: str | None = None,
-               dpi: int = 90) -> Path:
-    """Measured vs simulated roll and pitch of one trial (PNG, matplotlib Agg)."""
+               dpi: int = 90, label: str = "simulated", others: Sequence[tuple[str, SimResult]] = ()) -> Path:
+    """Measured vs simulated roll and pitch of one trial (PNG, matplotlib Agg); ``others``:
+    further simulations (label, result) drawn dashed (e.g. the nominal model)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -571,7 +572,9 @@ def plot_trial(trial: Trial, sim: SimResult, score: TrialScore | None, path: str
     for ax, meas, simv, name, key in ((axs[0], imu.roll, sim.roll, "roll", "rms_roll"),
                                       (axs[1], imu.pitch, sim.pitch, "pitch", "rms_pitch")):
         ax.plot(imu.t[sel], np.degrees(meas[sel]), "k-", lw=1.2, label="IMU")
-        ax.plot(sim.t, np.degrees(simv), "C0-", lw=1.2, label="simulated")
+        for i, (lab, o) in enumerate(others):
+            ax.plot(o.t, np.degrees(o.roll if name == "roll" else o.pitch), "--", color=f"C{i + 1}", lw=1.0, label=lab)
+        ax.plot(sim.t, np.degrees(simv), "C0-", lw=1.2, label=label)
         if score is not None:
             for mv in score.moves:
                 ax.axvspan(mv[0], mv[1], color="0.9", zorder=0)
@@ -586,7 +589,3 @@ def plot_trial(trial: Trial, sim: SimResult, score: TrialScore | None, path: str
     fig.savefig(p, dpi=dpi)
     plt.close(fig)
     return p
-
-
-def grid_times(t0: float, t1: float, dt: float) -> np.ndarray:  # pragma: no cover - convenience
-    return uniform_grid(t0, t1, dt)
