@@ -144,6 +144,25 @@ def test_identification_recovers_known_parameters(excerpt):
     assert nominal_values("hinsdale2023", names) == pytest.approx([0.02, 0.0])
 
 
+def test_folds_are_disjoint_deterministic_and_cover_every_trial():
+    from uvms_mj.identify import folds
+
+    names = ["b", "a", "d", "c", "e"]
+    parts = folds(names, 2)
+    assert parts == [["a", "c", "e"], ["b", "d"]] == folds(list(reversed(names)), 2)
+    with pytest.raises(ValueError, match="at least 2 folds"):
+        folds(names, 1)
+    with pytest.raises(ValueError, match="at least 6 trials"):
+        folds(names, 6)
+
+
+def test_identify_refuses_scoring_a_fit_trial(excerpt):
+    with pytest.raises(ValueError, match="both fitted and scored"):
+        identify(excerpt.trials, fit=["015-0"], score=["015-0"], jobs=1)
+    with pytest.raises(ValueError, match="unknown parameter"):
+        identify(excerpt.trials, fit=["015-0"], names=["nope"], jobs=1)
+
+
 # ----------------------------------------------------------------------------- CLI (CI short version)
 
 
