@@ -259,6 +259,8 @@ def test_cli_bad_input_is_one_line(tmp_path):
     assert r.exit_code == 2 and "unknown parameter(s) cob_q" in r.output
     r = CliRunner().invoke(main, ["identify", str(EXCERPT)])
     assert r.exit_code == 2 and "--fit" in r.output
+    r = CliRunner().invoke(main, ["identify", str(EXCERPT), "--fit", "015-0", "-o", str(tmp_path / "no" / "o.yaml")])
+    assert r.exit_code == 2 and "cannot write" in r.output
     r = CliRunner().invoke(main, ["sim2real", str(EXCERPT), "--trials", "nope"])
     assert r.exit_code == 2 and "nope" in r.output
 

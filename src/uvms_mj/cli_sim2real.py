@@ -255,6 +255,11 @@ def identify(data_dir, fit_names, score_names, cv, trial_names, param_names, mod
         raise click.UsageError("give --fit TRIALS (and optionally --score), or --cv K")
     if cv is not None and (fit_names or score_names):
         raise click.UsageError("--cv replaces --fit/--score: give one or the other")
+    import os
+
+    parent = Path(out).resolve().parent
+    if not parent.is_dir() or not os.access(parent, os.W_OK) or Path(out).is_dir():
+        raise click.UsageError(f"-o/--out: cannot write {out} (its folder does not exist or is not writable)")
     fit = _names(fit_names) or []
     score = _names(score_names)
     wanted = _names(trial_names) if cv is not None else (fit + score if score else None)
