@@ -836,3 +836,5 @@ def view(model: str) -> None:
 
 if __name__ == "__main__":
     main()
+from .cli_sim2real import identify, sim2real  # noqa: E402
+main.add_command(sim2real); main.add_command(identify)  # noqa: E702
