@@ -834,7 +834,10 @@ def view(model: str) -> None:
     mujoco.viewer.launch(m)
 
 
+from .cli_sim2real import identify, sim2real  # noqa: E402
+
+main.add_command(sim2real)
+main.add_command(identify)
+
 if __name__ == "__main__":
     main()
-from .cli_sim2real import identify, sim2real  # noqa: E402
-main.add_command(sim2real); main.add_command(identify)  # noqa: E702

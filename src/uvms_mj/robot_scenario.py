@@ -201,6 +201,9 @@ class RobotHydro(_Section):
 
 
 class RobotPlantSection(_Section):
+    overrides_file: str | None = Field(None, min_length=1, max_length=4096, description=(
+        "YAML file of '<element>.<field>': value overrides (e.g. what uvms-mj identify writes), "
+        "relative to the scenario file; applied before overrides"))
     overrides: dict[str, Any] = Field(default_factory=dict, description="'<element>.<field>': value")
     hydro: RobotHydro = Field(default_factory=RobotHydro)
     gravity: bool = True
@@ -282,6 +285,11 @@ class RobotScenario(_Section):
             raise _Issues([(("robot",), str(exc).split(": ", 1)[-1], self.robot)]) from None
         issues: list = []
         # overrides, by element name (each applied alone to find the culprit)
+        if self.plant.overrides_file is not None:
+            try:
+                compile_robot_spec(path, read_overrides_file(self.plant.overrides_file, self.base_dir))
+            except ParameterError as exc:
+                issues.append((("plant", "overrides_file"), str(exc), _NO_VALUE))
         for sec in ("plant", "nominal"):
             for key, value in getattr(self, sec).overrides.items():
                 try:
@@ -361,6 +369,39 @@ class RobotScenario(_Section):
         if issues:
             raise _Issues(issues)
         return self
+
+
+def read_overrides_file(path: str, base_dir: str | None) -> dict:
+    """The overrides of a YAML file (a mapping of "<element>.<field>" to values).
+
+    Raises:
+        ParameterError: missing or unreadable file, not a mapping of strings to numbers/lists.
+    """
+    import yaml
+
+    p = Path(path).expanduser()
+    if not p.is_absolute() and base_dir is not None:
+        p = Path(base_dir) / p
+    try:
+        data = yaml.safe_load(p.read_text())
+    except FileNotFoundError:
+        raise ParameterError(f"{path}: no such overrides file") from None
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise ParameterError(f"{path}: cannot read the overrides file: {exc}") from None
+    if data is None:
+        return {}
+    if not isinstance(data, dict) or not all(isinstance(k, str) for k in data):
+        raise ParameterError(f"{path}: an overrides file is a mapping of '<element>.<field>' to values")
+    return data
+
+
+def plant_overrides(sc: "RobotScenario") -> dict:
+    """The plant's overrides: the overrides file's, then plant.overrides on top."""
+    over = {}
+    if sc.plant.overrides_file is not None:
+        over.update(read_overrides_file(sc.plant.overrides_file, sc.base_dir))
+    over.update(sc.plant.overrides)
+    return over
 
 
 def _check_params(name: str, params: dict) -> list:
@@ -455,7 +496,7 @@ def robot_info(sc: RobotScenario, plant: RobotPlant | None = None) -> dict:
     """The run's robot for logs: {name, path, overrides, layout}."""
     path = robot_path(sc.robot, sc.base_dir)
     lay = plant.layout if plant is not None else _compiled(str(path))[1]
-    return {"name": sc.robot, "path": str(path), "overrides": _S._jsonable(sc.plant.overrides),
+    return {"name": sc.robot, "path": str(path), "overrides": _S._jsonable(plant_overrides(sc)),
             "layout": lay.describe()}
 
 
@@ -477,7 +518,7 @@ def build(sc: RobotScenario) -> tuple[RobotPlant, Any]:
     try:
         ph, pl = sc.physics, sc.plant
         plant = RobotPlant(
-            robot_path(sc.robot, sc.base_dir), overrides=pl.overrides,
+            robot_path(sc.robot, sc.base_dir), overrides=plant_overrides(sc),
             terms=HydroTerms(added_mass=pl.hydro.added_mass, drag=pl.hydro.drag, buoyancy=pl.hydro.buoyancy),
             gravity=pl.gravity, current=pl.current, timestep=ph.timestep, integrator=ph.integrator,
             initial=sc.initial.state(), tip_site=sc.tip_site, backend=None if ph.backend == "auto" else ph.backend,

@@ -718,7 +718,10 @@ def validate_scenario(data: Any, source: str = "<scenario>", base_dir: str | Pat
         from .robot import BUILTIN_ROBOTS
 
         # The scenario file's folder matters only for a robot given as a relative path.
-        if base_dir is not None and (not isinstance(robot, str) or robot in BUILTIN_ROBOTS):
+        plant = data.get("plant") if isinstance(data.get("plant"), dict) else {}
+        traj = data.get("trajectory") if isinstance(data.get("trajectory"), dict) else {}
+        if base_dir is not None and (not isinstance(robot, str) or robot in BUILTIN_ROBOTS) \
+                and plant.get("overrides_file") is None and traj.get("kind") != "csv":
             base_dir = None
         try:
             return RobotScenario.model_validate({**data, "base_dir": None if base_dir is None else str(base_dir)})
