@@ -1,8 +1,9 @@
-"""End-to-end speed of the paper scenario: plant + controller + logging.
+"""End-to-end speed of a scenario: plant + controller + logging.
 
-    python benchmarks/bench_pipeline.py [--repeats 3] [--sweep-runs 8]
+    python benchmarks/bench_pipeline.py [--repeats 3] [--sweep-runs 8] [--scenario NAME ...]
 
-Prints, for scenarios/paper.yaml (40 s, rac_dob):
+Prints, for scenarios/paper.yaml (40 s, rac_dob) and the 3-D circle study
+scenarios/bluerov2_alpha_circle_current.yaml (40 s, rac_dob; BlueROV2 Heavy + Alpha arm, 50 Hz):
   * the real-time factor of the whole pipeline (plant with hydrodynamics + 60 Hz controller +
     MCAP logging) and of the pipeline without logging;
   * its ratio to bare MuJoCo stepping of the same model (no hydrodynamics, same integrator and
@@ -28,7 +29,9 @@ from uvms_mj.loop import run_closed_loop
 from uvms_mj.recorder import McapRecorder
 from uvms_mj.scenario import build, load_scenario, sensor_model
 
-SCENARIO = Path(__file__).resolve().parents[1] / "scenarios" / "paper.yaml"
+SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
+SCENARIO = SCENARIOS / "paper.yaml"
+DEFAULT_SCENARIOS = ("paper", "bluerov2_alpha_circle_current")
 
 
 class Timer:
@@ -45,8 +48,8 @@ class Timer:
             self.total += time.perf_counter() - t0
 
 
-def one_run(log: bool, split: bool = False) -> dict:
-    sc = load_scenario(SCENARIO)
+def one_run(log: bool, split: bool = False, scenario: Path = SCENARIO) -> dict:
+    sc = load_scenario(scenario)
     plant, ctrl = build(sc)
     T = ctrl.T
     timers = {}
@@ -54,7 +57,8 @@ def one_run(log: bool, split: bool = False) -> dict:
         timers["plant"] = plant.step = Timer(plant.step)
         timers["controller"] = ctrl.compute = Timer(ctrl.compute)
     with tempfile.TemporaryDirectory() as tmp:
-        rec = McapRecorder(Path(tmp) / "bench.mcap", plant.params, {"bench": True}) if log else None
+        kw = {"model": plant.model} if getattr(plant, "layout", None) is not None else {}
+        rec = McapRecorder(Path(tmp) / "bench.mcap", plant.params, {"bench": True}, **kw) if log else None
         sink = None
         if rec is not None:
             sink = rec.write_sample
@@ -68,14 +72,19 @@ def one_run(log: bool, split: bool = False) -> dict:
         wall = time.perf_counter() - t0
     steps = round(sc.duration / plant.model.opt.timestep)
     return {"wall": wall, "steps": steps, "sim": sc.duration, "timers": {k: v.total for k, v in timers.items()},
-            "integrator": plant.model.opt.integrator, "timestep": plant.model.opt.timestep, "backend": plant.backend}
+            "integrator": plant.model.opt.integrator, "timestep": plant.model.opt.timestep, "backend": plant.backend,
+            "path": plant.model_path, "T": T, "controller": ctrl.name}
 
 
-def bare(steps: int, integrator, timestep: float) -> float:
-    m = mujoco.MjModel.from_xml_path(str(default_model_path()))
+def bare(steps: int, integrator, timestep: float, path=None) -> float:
+    """Bare MuJoCo stepping of the same model file without its plugins (no hydrodynamics)."""
+    from uvms_mj.physics import model as pm
+
+    m = pm.compile_spec(pm.load_spec(path or default_model_path()), native=False)
     m.opt.integrator, m.opt.timestep = integrator, timestep
     d = mujoco.MjData(m)
-    mujoco.mj_resetDataKeyframe(m, d, 0)
+    if m.nkey:
+        mujoco.mj_resetDataKeyframe(m, d, 0)
     t0 = time.perf_counter()
     for _ in range(steps):
         mujoco.mj_step(m, d)
@@ -98,21 +107,15 @@ def sweep_throughput(workers: int, runs: int, duration: float) -> float:
         return runs / (time.perf_counter() - t0)
 
 
-def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--repeats", type=int, default=3)
-    ap.add_argument("--sweep-runs", type=int, default=8)
-    ap.add_argument("--sweep-duration", type=float, default=10.0)
-    args = ap.parse_args()
-
-    full = min((one_run(log=True) for _ in range(args.repeats)), key=lambda r: r["wall"])
-    nolog = min((one_run(log=False) for _ in range(args.repeats)), key=lambda r: r["wall"])
-    split = min((one_run(log=True, split=True) for _ in range(args.repeats)), key=lambda r: r["wall"])
-    t_bare = min(bare(full["steps"], full["integrator"], full["timestep"]) for _ in range(args.repeats))
+def report(scenario: Path, repeats: int) -> None:
+    full = min((one_run(log=True, scenario=scenario) for _ in range(repeats)), key=lambda r: r["wall"])
+    nolog = min((one_run(log=False, scenario=scenario) for _ in range(repeats)), key=lambda r: r["wall"])
+    split = min((one_run(log=True, split=True, scenario=scenario) for _ in range(repeats)), key=lambda r: r["wall"])
+    t_bare = min(bare(full["steps"], full["integrator"], full["timestep"], full["path"]) for _ in range(repeats))
 
     sim = full["sim"]
-    print(f"paper scenario: {sim:g} s simulated, {full['steps']} physics steps, backend {full['backend']}, "
-          f"best of {args.repeats}")
+    print(f"{scenario.stem}: {sim:g} s simulated, {full['steps']} physics steps ({full['timestep'] * 1e3:.3g} ms), "
+          f"controller {full['controller']} at {1 / full['T']:.0f} Hz, backend {full['backend']}, best of {repeats}")
     print(f"  pipeline with logging     {full['wall']:7.3f} s   {sim / full['wall']:6.1f}x real time   "
           f"{full['wall'] / t_bare:5.1f}x bare MuJoCo")
     print(f"  pipeline without logging  {nolog['wall']:7.3f} s   {sim / nolog['wall']:6.1f}x real time   "
@@ -122,13 +125,25 @@ def main() -> None:
     parts = {
         "MuJoCo (bare stepping)": t_bare,
         "hydrodynamics (plant - bare)": max(tm["plant"] - t_bare, 0.0),
-        "controller (60 Hz compute)": tm["controller"],
+        "controller (compute)": tm["controller"],
         "logging (MCAP write)": tm["logging"],
     }
     parts["loop, sensors, recording"] = max(split["wall"] - sum(parts.values()), 0.0)
     print("  split of the pipeline (instrumented run, %.3f s):" % split["wall"])
     for k, v in parts.items():
         print(f"    {k:<32}{v:7.3f} s  {100 * v / split['wall']:5.1f} %")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--sweep-runs", type=int, default=8)
+    ap.add_argument("--sweep-duration", type=float, default=10.0)
+    ap.add_argument("--scenario", nargs="+", default=list(DEFAULT_SCENARIOS), help="scenario names (scenarios/)")
+    args = ap.parse_args()
+
+    for name in args.scenario:
+        report(SCENARIOS / f"{name}.yaml", args.repeats)
     if args.sweep_runs:
         r1 = sweep_throughput(1, args.sweep_runs, args.sweep_duration)
         r2 = sweep_throughput(2, args.sweep_runs, args.sweep_duration)
