@@ -316,10 +316,10 @@ class RAC(Controller):
             return va - vb
         out = np.empty(self.ntask)
         out[0:3] = va[0:3] - vb[0:3]
-        out[3:6] = rotation_log(ra[0] @ rb[0].T)
+        out[3:6] = 0.0 if ra[0] is rb[0] else rotation_log(ra[0] @ rb[0].T)  # same desired attitude: 0
         out[6:9] = va[3:6] - vb[3:6]
         if self.tip_orientation:
-            out[9:12] = rotation_log(ra[1] @ rb[1].T)
+            out[9:12] = 0.0 if ra[1] is rb[1] else rotation_log(ra[1] @ rb[1].T)
         return out
 
     def _jacobian(self, jac: dict) -> np.ndarray:
@@ -401,6 +401,7 @@ class RAC(Controller):
         self._base_offset = {m.k: np.zeros(3 if self.free else self.lin.size)}
         self._k0 = m.k
         self._pd_prev = self._desired(m.k)
+        self._pd_next = None
         self._e_p_prev = np.zeros(self.ntask)
         self._q_prev = q.copy()
         self._p_prev = self._task(q, jac)
@@ -444,8 +445,12 @@ class RAC(Controller):
         v_base = self.singular.update(k, manip)
         self._base_offset[k + 1] = self._base_offset[k] + T * v_base
 
-        p_d = self._desired(k)
+        # p_d(k) was computed as p_d(k + 1) at the previous sample (same offset: the Eq. 12 offset
+        # of k + 1 is fixed before p_d(k + 1) is formed)
+        cached = self._pd_next
+        p_d = cached[1] if cached is not None and cached[0] == k else self._desired(k)
         p_d_next = self._desired(k + 1)
+        self._pd_next = (k + 1, p_d_next)
         e_p = self._diff(p_d, p)
         v_d = (self._diff(p_d, self._pd_prev) + self.gamma * self._e_p_prev) / T  # Eq. 11
         v_d_next = (self._diff(p_d_next, p_d) + self.gamma * e_p) / T  # Eq. 11 at k + 1
