@@ -4,7 +4,7 @@
 
 For each robot (the paper's planar robot ``models/scene.xml``, the 3-D test robot
 ``tests/models/robot3d.xml``: a free-floating base with a 4-link arm, and the BlueROV2 Heavy
-with an Alpha-class arm ``models/bluerov2_alpha.xml``) and each setting (RK4 at
+with an Alpha-class arm ``models/bluerov2_alpha.xml``) and each setting (the model's own integrator at
 the model's step, Euler at 1/600 s), plain ``mujoco.mj_step`` loops on:
 
 * bare: the same model file with the uvms plugins removed (no hydrodynamics);
@@ -70,7 +70,10 @@ def main() -> None:
     rows = []
     for robot, path in ROBOTS.items():
         spec = pm.load_spec(path)
-        settings = (("RK4, model step", None, None), ("Euler, 1/600 s", mujoco.mjtIntegrator.mjINT_EULER, 1 / 600))
+        probe = pm.compile_spec(spec, native=False)
+        default = (f"{mujoco.mjtIntegrator(probe.opt.integrator).name.removeprefix('mjINT_')}, "
+                   f"{probe.opt.timestep * 1e3:.3g} ms (model)")
+        settings = ((default, None, None), ("Euler, 1/600 s", mujoco.mjtIntegrator.mjINT_EULER, 1 / 600))
         for label, integrator, dt in settings:
             models = {"bare": pm.compile_spec(spec, native=False), "plugin": pm.compile_spec(spec, native=True),
                       "python": pm.compile_spec(spec, native=False)}
@@ -101,9 +104,9 @@ def main() -> None:
 
     print(f"mujoco {mujoco.__version__}; {args.seconds:g} s simulated, best of {args.repeats} "
           "(python: 1/20 of the steps, once)")
-    print(f"{'robot':<25}{'setting':<17}{'run':<12}{'us/step':>9}{'x bare':>8}{'RTF':>9}")
+    print(f"{'robot':<25}{'setting':<28}{'run':<12}{'us/step':>9}{'x bare':>8}{'RTF':>9}")
     for robot, label, what, us, ratio, rtf in rows:
-        print(f"{robot:<25}{label:<17}{what:<12}{us:>9.2f}{ratio:>8.2f}{rtf:>8.0f}x")
+        print(f"{robot:<25}{label:<28}{what:<12}{us:>9.2f}{ratio:>8.2f}{rtf:>8.0f}x")
 
     # rollout: N runs of 1 s of the 3-D robot from random velocities, 1 vs 2 threads (with no
     # Python mjcb_passive left installed by the python rows above)
