@@ -135,3 +135,21 @@ def test_bad_gains_name_the_task_size():
     with pytest.raises(ControllerError, match=r"gamma\[2\]"):
         create("rac", robot=NominalRobot("bluerov2_alpha"), gamma=[0.3, 0.3, 1.5, 0.2, 0.2, 0.2, 0.2, 0.2, 0.2])
     assert mujoco.mj_name2id  # (mujoco imported for the plugins' registration above)
+
+
+def test_paper_robot_follows_any_trajectory_kind():
+    """trajectory.curve on the paper scenario: the generic RAC follows a circle in the plane
+    (still water and the exact model: sub-millimetre); the line-only controllers refuse it
+    when the scenario is built, naming the controller."""
+    from uvms_mj.scenario import ScenarioError, build
+
+    curve = "trajectory.curve={kind: circle, centre: [0, 0, 0], radius: 0.05, period: 20, t_ramp: 5, t_start: 1}"
+    sc = load_scenario(SCEN / "paper.yaml", [curve, "duration=15", "plant.model_mismatch=false"])
+    res = run_scenario(sc)
+    m = metrics(res)
+    assert res.status == "ok" and m["tip_max_mm"] < 0.5, m
+    pd_ = res.signals["p_desired"][:, 3:5]
+    assert np.ptp(pd_[:, 1]) > 0.05  # it went round (diameter 0.1 m, vertical extent > 5 cm by 15 s)
+    for name in ("pd", "rac_planar"):
+        with pytest.raises(ScenarioError, match="straight line only"):
+            build(load_scenario(SCEN / "paper.yaml", [curve, f"controller.name={name}"]))

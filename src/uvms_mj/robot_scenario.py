@@ -458,6 +458,9 @@ class _Shifted:
     def __init__(self, base, offset: np.ndarray) -> None:
         self.base, self.offset = base, np.asarray(offset, dtype=float)
 
+    def __repr__(self) -> str:
+        return f"{type(self.base).__name__} shifted by {np.round(self.offset, 6).tolist()} m"
+
     def position(self, t):
         return np.asarray(self.base.position(t)) + self.offset
 

@@ -49,6 +49,8 @@ exactly what ``PaperExperiment().run()`` runs. Units SI, world frame X horizonta
       base_reference: measured  # the base's reference pose: measured (the first measurement) |
                                 #   truth (the plant's initial pose) | nominal (the model file's keyframe)
     trajectory:                 # straight end-tip line with a trapezoidal speed profile
+      curve: null               # or any uvms_mj.trajectories kind, e.g. {kind: circle, centre: [0, 0, 0],
+                                #   radius: 0.05, period: 20}: world, z ignored, started at the initial tip
       target: null              # [x, y] world [m], or
       displacement: [0.3, 0.0]  # [dx, dy] from the initial tip position [m] (exactly one of the two)
       cruise_speed: 0.02        # [m/s]
@@ -545,6 +547,24 @@ class Trajectory(_Section):
     cruise_speed: float = Field(0.02, ge=SIZE_MIN, le=SPEED_MAX, description="[m/s]")
     accel: float = Field(0.02, ge=SIZE_MIN, le=ACCEL_MAX, description="[m/s^2]")
     t_start: float = Field(1.0, ge=0, le=DURATION_MAX, description="rest before moving [s]")
+    curve: dict[str, Any] | None = Field(
+        None, description="instead of the line: any uvms_mj.trajectories kind ({kind: waypoints|circle|lemniscate|"
+        "helix|csv|line, ...}, world [x, y, z], z ignored: the paper's plane), shifted to start at the initial tip; "
+        "for controllers that take any trajectory (rac, rac_dob)")
+
+    @field_validator("curve")
+    @classmethod
+    def _curve(cls, v: dict | None) -> dict | None:
+        if v is not None:
+            from .trajectories import make_trajectory
+
+            try:
+                make_trajectory(v)
+            except ValueError as exc:
+                msg = str(exc)
+                raise _Issues([((), msg[len("trajectory."):] if msg.startswith("trajectory.") else msg, _NO_VALUE)]) \
+                    from None
+        return v
 
     @model_validator(mode="after")
     def _one_end(self) -> "Trajectory":
@@ -1052,6 +1072,12 @@ def build(scenario: Scenario) -> tuple[Plant, Any]:
         target = np.asarray(tr.target, dtype=float) if tr.target is not None else start + np.asarray(tr.displacement)
         path = StraightLine(start=tuple(float(v) for v in start), target=tuple(float(v) for v in target),
                             cruise_speed=tr.cruise_speed, accel=tr.accel, t_start=tr.t_start)
+        if tr.curve is not None:
+            from .robot_scenario import _Shifted
+            from .trajectories import make_trajectory
+
+            curve = make_trajectory(tr.curve)
+            path = _Shifted(curve, np.r_[start, 0.0] - np.asarray(curve.position(0.0), dtype=float))
         params = dict(scenario.controller.params)
         ref = scenario.controller.base_reference
         if ref == "truth":

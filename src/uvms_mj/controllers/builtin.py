@@ -151,7 +151,8 @@ class RAC(Controller):
         observer_input: str = "allocated",
     ) -> None:
         if not isinstance(trajectory, StraightLine):
-            raise ControllerError(f"trajectory = {trajectory!r} must be a StraightLine")
+            raise ControllerError(f"trajectory = {trajectory!r} must be a StraightLine (this planar oracle follows "
+                                  "a straight line only; rac and rac_dob take any trajectory)")
         self.trajectory = trajectory
         self.nominal = nominal or NominalModel()
         self.T = check_positive("T", T)
@@ -315,6 +316,9 @@ class TaskPD(Controller):
 
     def __init__(self, trajectory: StraightLine, nominal: NominalModel | None = None, T: float = PAPER_T,
                  omega: float = 2.0, zeta: float = 1.0, allocation: str = "clip", **_ignored) -> None:
+        if not isinstance(trajectory, StraightLine):
+            raise ControllerError(f"controller 'pd' follows a straight line only (trajectory = {trajectory!r}); "
+                                  "rac and rac_dob take any trajectory")
         self.trajectory = trajectory
         self.nominal = nominal or NominalModel()
         self.T = check_positive("T", T)
