@@ -405,3 +405,20 @@ def test_bad_bc_type(tmp_path) -> None:
     write_csv(f, [0.0, 1.0], [[0, 0, 0], [1, 0, 0]])
     with pytest.raises(ValueError, match=r"trajectory.bc_type = 'natrual'.*did you mean 'natural'"):
         make_trajectory({"kind": "csv", "path": str(f), "bc_type": "natrual"})
+
+
+def test_scalar_time_paths_equal_the_vectorised_ones():
+    """The per-sample (float t) fast paths of Waypoints and the phase curves give the vectorised
+    formulas' values bit for bit (before, during and after the ramps and segments)."""
+    from uvms_mj.trajectories import Circle, Lemniscate, Waypoints
+
+    trs = [Circle(centre=(0, 0, 0), radius=0.05, normal=(1, 0, 0), period=20, t_ramp=5, t_start=2),
+           Circle(centre=(0, 0, 0), radius=0.05, normal=(0, 0, 1), period=7),
+           Lemniscate(centre=(0, 0, 0), size=0.1, normal=(0, 0, 1), period=10, t_ramp=3),
+           Waypoints(points=((0, 0, 0), (0.1, 0.2, 0), (0, 0, 0.1)), durations=(2, 3), t_start=1)]
+    ts = np.linspace(-1, 30, 621)
+    for tr in trs:
+        for f in ("position", "velocity", "acceleration"):
+            vec = getattr(tr, f)(ts)
+            one = np.array([getattr(tr, f)(float(t)) for t in ts])
+            np.testing.assert_array_equal(vec, one)

@@ -152,6 +152,19 @@ def _ramped_time(t: np.ndarray, t_start: float, t_ramp: float) -> tuple[np.ndarr
     return g, dg, ddg
 
 
+def _ramped_time_scalar(t: float, t_start: float, t_ramp: float) -> tuple[float, float, float]:
+    """:func:`_ramped_time` for one time (same formulas, plain floats)."""
+    tp = t - t_start
+    if t_ramp <= 0:
+        return (tp, 1.0, 0.0) if tp > 0 else (0.0, 0.0, 0.0)
+    if tp >= t_ramp:
+        return tp - 0.5 * t_ramp, 1.0, 0.0
+    x = min(max(tp / t_ramp, 0.0), 1.0)
+    s = x ** 3 * (10.0 + x * (-15.0 + 6.0 * x))
+    ds = 30.0 * x ** 2 * (1.0 + x * (-2.0 + x))
+    return t_ramp * x ** 4 * (2.5 + x * (-3.0 + x)), s, ds / t_ramp
+
+
 def _plane_basis(normal: tuple[float, float, float], phase_axis: tuple[float, float, float] | None, field: str):
     """Orthonormal (u, v, n) with u x v = n; u: phase_axis (default world X, else world Y) projected."""
     n = np.asarray(normal, dtype=float)
@@ -497,7 +510,10 @@ class _PhaseCurve(Trajectory):
 
     def theta(self, t: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(theta, theta', theta''): phase [rad] and its rates; theta = phase + omega g(t)."""
-        g, dg, ddg = _ramped_time(np.asarray(t, dtype=float), self.t_start, self.t_ramp)
+        if isinstance(t, (float, int)) and not isinstance(t, bool):
+            g, dg, ddg = _ramped_time_scalar(float(t), self.t_start, self.t_ramp)
+        else:
+            g, dg, ddg = _ramped_time(np.asarray(t, dtype=float), self.t_start, self.t_ramp)
         w = self._w
         return self.phase + w * g, w * dg, w * ddg
 
