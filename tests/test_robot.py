@@ -278,3 +278,14 @@ def test_robot_scenario_errors_name_the_field(patch, msg):
 def test_paper_scenarios_unchanged_by_robot_field():
     assert validate_scenario({}).robot == "paper"
     assert type(validate_scenario({"robot": "paper"})).__name__ == "Scenario"
+
+
+def test_any_mjcf_robot_without_thrusters_or_motors_runs(tmp_path):
+    """A robot file given by path (the 3-D test robot: no thrusters, no motors) runs from a
+    scenario: the vehicle floats unactuated; rac asks for a tip site by name."""
+    f = tmp_path / "r.yaml"
+    f.write_text(f"robot: {REPO / 'tests' / 'models' / 'robot3d.xml'}\nduration: 0.5\n")
+    res = run_scenario(load_scenario(f))
+    assert res.status == "ok" and res.signals["thrust_force"].shape == (26, 0)
+    with pytest.raises(ScenarioError, match="end-effector site"):
+        load_scenario(f, ["controller.name=rac"])

@@ -121,6 +121,8 @@ class NominalRobot:
     def allocation(self) -> np.ndarray:
         """(6, n_thrusters) allocation matrix, vehicle BODY axes, moments about the vehicle origin
         (:func:`uvms_mj.thrusters.allocation_matrix`; configuration-independent)."""
+        if not self.layout.thruster_names:
+            return np.zeros((6, 0))  # no thrusters: the vehicle cannot be actuated
         self._set(self.model.qpos0.copy())
         return allocation_matrix(self.model, self.data, list(self.layout.thruster_names), frame="body",
                                  body=self.layout.base_body)

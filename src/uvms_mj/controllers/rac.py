@@ -286,12 +286,13 @@ class RAC(Controller):
         self.wrench_rows = np.flatnonzero(np.linalg.norm(mob, axis=1) > 1e-9)
         Bc = B[self.wrench_rows]
         if allocation == "auto":
-            allocation = "clip" if Bc.shape[0] == Bc.shape[1] else "wls"
+            allocation = "clip" if Bc.shape[0] == Bc.shape[1] or B.shape[1] == 0 else "wls"
         self.allocation = allocation
         self.B = B
         self.lo, self.hi = robot.thruster_lo, robot.thruster_hi
         self.B_pinv = np.linalg.pinv(Bc)
-        self.allocator = Allocator(B, self.lo, self.hi, dofs=self.wrench_rows) if allocation == "wls" else None
+        self.allocator = (Allocator(B, self.lo, self.hi, dofs=self.wrench_rows)
+                          if allocation == "wls" and B.shape[1] else None)
 
     # ---------------------------------------------------------------- task space
 
