@@ -524,7 +524,29 @@ class _PhaseCurve(Trajectory):
     def _axial(self, t: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray] | None:
         return None
 
+    @property
+    def _axial_none(self) -> bool:
+        return type(self)._axial is _PhaseCurve._axial
+
+    def _f_scalar(self, th: float) -> tuple[tuple[float, float], ...] | None:
+        """(f, f_theta, f_thetatheta) as (x, y) pairs for one angle (None: use :meth:`_f`)."""
+        return None
+
     def _eval(self, t: Any, order: int) -> np.ndarray:
+        if isinstance(t, (float, int)) and not isinstance(t, bool) and self._axial_none:
+            th, dth, ddth = self.theta(float(t))
+            fs = self._f_scalar(th)
+            if fs is not None:  # the same formulas on floats (the controllers' per-sample call)
+                (fx, fy), (gx, gy), (hx, hy) = fs
+                if order == 0:
+                    px, py = fx, fy
+                elif order == 1:
+                    px, py = gx * dth, gy * dth
+                else:
+                    d2 = dth * dth
+                    px, py = hx * d2 + gx * ddth, hy * d2 + gy * ddth
+                out = self._U[:, 0] * px + self._U[:, 1] * py
+                return out + self._c if order == 0 else out
         t = np.asarray(t, dtype=float)
         th, dth, ddth = self.theta(t)
         f, f1, f2 = self._f(th)
@@ -597,6 +619,11 @@ class Circle(_PhaseCurve):
         c, s = np.cos(th), np.sin(th)
         return (r * np.stack([c, s], -1), r * np.stack([-s, c], -1), -r * np.stack([c, s], -1))
 
+    def _f_scalar(self, th: float):
+        r = self.radius
+        c, s = math.cos(th), math.sin(th)
+        return (r * c, r * s), (-r * s, r * c), (-r * c, -r * s)
+
 
 @dataclass(frozen=True)
 class Lemniscate(_PhaseCurve):
@@ -640,6 +667,12 @@ class Lemniscate(_PhaseCurve):
             np.stack([a * c, a * c2], -1),
             np.stack([-a * s, -2 * a * s2], -1),
         )
+
+    def _f_scalar(self, th: float):
+        a = self.size
+        s, c = math.sin(th), math.cos(th)
+        s2, c2 = math.sin(2 * th), math.cos(2 * th)
+        return (a * s, 0.5 * a * s2), (a * c, a * c2), (-a * s, -2 * a * s2)
 
 
 @dataclass(frozen=True)

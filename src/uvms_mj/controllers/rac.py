@@ -100,6 +100,48 @@ class _Singular:
         return self.v
 
 
+def small_inv(A: np.ndarray) -> np.ndarray:
+    """Inverse of a 1x1, 2x2 or 3x3 matrix in closed form (adjugate / determinant; numpy's
+    LAPACK call costs more than the arithmetic at these sizes), else ``numpy.linalg.inv``.
+
+    Raises:
+        numpy.linalg.LinAlgError: singular matrix (determinant exactly 0)."""
+    n = A.shape[0]
+    if n > 3:
+        return np.linalg.inv(A)
+    if n == 1:
+        if A[0, 0] == 0:
+            raise np.linalg.LinAlgError("Singular matrix")
+        return np.array([[1.0 / A[0, 0]]])
+    if n == 2:
+        (a, b), (c, d) = A.tolist()
+        det = a * d - b * c
+        if det == 0:
+            raise np.linalg.LinAlgError("Singular matrix")
+        return np.array([[d / det, -b / det], [-c / det, a / det]])
+    (a, b, c), (d, e, f), (g, h, i) = A.tolist()
+    co = [e * i - f * h, f * g - d * i, d * h - e * g]
+    det = a * co[0] + b * co[1] + c * co[2]
+    if det == 0:
+        raise np.linalg.LinAlgError("Singular matrix")
+    return np.array([[co[0], c * h - b * i, b * f - c * e],
+                     [co[1], a * i - c * g, c * d - a * f],
+                     [co[2], b * g - a * h, a * e - b * d]]) / det
+
+
+def small_det(A: np.ndarray) -> float:
+    """Determinant of a 1x1, 2x2 or 3x3 matrix in closed form, else ``numpy.linalg.det``."""
+    n = A.shape[0]
+    if n == 1:
+        return float(A[0, 0])
+    if n == 2:
+        return float(A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0])
+    if n == 3:
+        (a, b, c), (d, e, f), (g, h, i) = A.tolist()
+        return a * (e * i - f * h) + b * (f * g - d * i) + c * (d * h - e * g)
+    return float(np.linalg.det(A))
+
+
 def _gains(name: str, value: Any, default: np.ndarray) -> np.ndarray:
     if value is None:
         return default.copy()
@@ -281,6 +323,17 @@ class RAC(Controller):
         B = robot.allocation()
         robot._set(m.qpos0.copy())
         Jb = self._base_jac(robot.jacobians())
+        self._Jb_const = None
+        if not self.free:  # the paper's base (slides, then a hinge at the origin): constant; checked
+            q1 = m.qpos0.copy()
+            q1[self.base_qpos] += np.random.default_rng(0).uniform(-1.0, 1.0, self.base_qpos.size)
+            robot._set(q1)
+            if np.allclose(self._base_jac(robot.jacobians()), Jb, rtol=0, atol=1e-12):
+                self._Jb_const = Jb.copy()
+                self._Jb_pinvT = np.linalg.pinv(Jb.T)
+            robot._set(m.qpos0.copy())
+            self._J_template = np.zeros((self.ntask, m.nv))
+            self._J_template[np.arange(nb), self.base_dofs] = 1.0
         R0 = robot.data.xmat[lay.base_body].reshape(3, 3)
         mob = np.vstack((R0.T @ Jb[:3], R0.T @ Jb[3:]))
         self.wrench_rows = np.flatnonzero(np.linalg.norm(mob, axis=1) > 1e-9)
@@ -328,8 +381,7 @@ class RAC(Controller):
         if self.free:
             rows = [jac["base_p"], jac["base_r"], jac["tip_p"]] + ([jac["tip_r"]] if self.tip_orientation else [])
             return np.vstack(rows)
-        J = np.zeros((self.ntask, nv))
-        J[np.arange(self.base_dofs.size), self.base_dofs] = 1.0
+        J = self._J_template.copy()  # base rows: the identity on the base dofs
         J[self.base_dofs.size:] = jac["tip_p"][self.tip_rows]
         return J
 
@@ -436,11 +488,11 @@ class RAC(Controller):
         nbt = self.nbt
         Bm = J[nbt:][:, a]  # arm Jacobian: tip rows, arm dofs
         if Bm.shape[0] == Bm.shape[1]:
-            detb = float(np.linalg.det(Bm))
+            detb = small_det(Bm)
             manip = abs(detb)
         else:
             detb = float("nan")
-            manip = float(np.sqrt(max(np.linalg.det(Bm @ Bm.T), 0.0)))
+            manip = math.sqrt(max(small_det(Bm @ Bm.T), 0.0))
 
         # Eq. 12: the base carries the arm while the manipulability is below js.
         v_base = self.singular.update(k, manip)
@@ -466,24 +518,23 @@ class RAC(Controller):
         if self.free:  # S = [[I, 0], [0, R]]: its inverse in closed form
             qdd_d[b[:3]] = rhs[:3]
             qdd_d[b[3:]] = jac["R_base"].T @ rhs[3:6]
-        else:
-            S = J[:nbt][:, b]
-            qdd_d[b] = np.linalg.solve(S, rhs[:nbt])
+        else:  # the base rows of J are the identity on the base dofs
+            qdd_d[b] = rhs[:nbt]
         r_m = rhs[nbt:] - J[nbt:][:, b] @ qdd_d[b]
         dls = manip < self.dls_threshold
         mu2 = self.dls_damping ** 2 * (1.0 - (manip / self.dls_threshold) ** 2) if dls else 0.0
         if Bm.shape[0] == Bm.shape[1]:
             if dls:
-                qdd_d[a] = Bm.T @ np.linalg.solve(Bm @ Bm.T + mu2 * np.eye(Bm.shape[0]), r_m)
+                qdd_d[a] = Bm.T @ (small_inv(Bm @ Bm.T + mu2 * np.eye(Bm.shape[0])) @ r_m)
             else:
-                qdd_d[a] = np.linalg.solve(Bm, r_m)
+                qdd_d[a] = small_inv(Bm) @ r_m
         else:
             ix = self._ix
             X = np.linalg.solve(M[ix["aa"]], Bm.T)  # W^-1 B^T, W = M_MM
             G = Bm @ X
             if mu2:
                 G = G + mu2 * np.eye(G.shape[0])
-            Bp = X @ np.linalg.inv(G)
+            Bp = X @ small_inv(G)
             q0dd = self.null_kp * (self.q_rest - q[self.arm_qadr]) - self.null_kd * qd[a]
             qdd_d[a] = Bp @ r_m + q0dd - Bp @ (Bm @ q0dd)
 
@@ -517,16 +568,21 @@ class RAC(Controller):
 
     def _allocate(self, u_B: np.ndarray, jac: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Generalized base force -> thrusts; returns (thrust, saturated, achieved base force)."""
-        Jb = self._base_jac(jac)  # u_B = Jb^T w (w: world wrench at the vehicle origin)
-        if self.free:
-            w = np.concatenate((u_B[:3], jac["R_base"] @ u_B[3:]))
-        else:
-            key = Jb.tobytes()
-            if key != self._Jb_key:  # constant for the paper's base (slides, then a hinge at the origin)
-                self._Jb_key, self._Jb_pinvT = key, np.linalg.pinv(Jb.T)
-            w = self._Jb_pinvT @ u_B
         R = jac["R_base"]
-        body = np.concatenate((R.T @ w[:3], R.T @ w[3:]))
+        # u_B = Jb^T w (w: the world wrench at the vehicle origin); free joint: Jb = [[I, 0], [0, R]]
+        if self.free:
+            body = np.concatenate((R.T @ u_B[:3], u_B[3:]))
+            Jb = None
+        else:
+            if self._Jb_const is not None:
+                Jb = self._Jb_const
+            else:
+                Jb = self._base_jac(jac)
+                key = Jb.tobytes()
+                if key != self._Jb_key:
+                    self._Jb_key, self._Jb_pinvT = key, np.linalg.pinv(Jb.T)
+            w = self._Jb_pinvT @ u_B
+            body = np.concatenate((R.T @ w[:3], R.T @ w[3:]))
         if self.allocator is not None:
             res = self.allocator(body[self.wrench_rows])
             f, sat = res.thrust, res.saturated
@@ -535,7 +591,9 @@ class RAC(Controller):
             sat = (f < self.lo) | (f > self.hi)
             if sat.any():
                 f = np.clip(f, self.lo, self.hi)
-        produced = self.B @ f
+        produced = self.B @ f  # body axes
+        if self.free:
+            return f, sat, np.concatenate((R @ produced[:3], produced[3:]))
         w_out = np.concatenate((R @ produced[:3], R @ produced[3:]))
         return f, sat, Jb.T @ w_out
 

@@ -53,18 +53,20 @@ def quat_to_mat(q: Sequence[float]) -> np.ndarray:
 
 def rotation_log(R: np.ndarray) -> np.ndarray:
     """Rotation vector (axis times angle [rad], angle in [0, pi]) of a rotation matrix."""
-    c = max(-1.0, min(1.0, 0.5 * (float(np.trace(R)) - 1.0)))
+    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = np.asarray(R, dtype=float).tolist()
+    c = max(-1.0, min(1.0, 0.5 * (r00 + r11 + r22 - 1.0)))
     a = math.acos(c)
-    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    wx, wy, wz = r21 - r12, r02 - r20, r10 - r01
     if a < 1e-6:
-        return 0.5 * w
+        return np.array([0.5 * wx, 0.5 * wy, 0.5 * wz])
     if math.pi - a < 1e-6:  # near pi: axis from the symmetric part
-        B = 0.5 * (R + np.eye(3))
+        B = 0.5 * (np.asarray(R, dtype=float) + np.eye(3))
         axis = np.sqrt(np.clip(np.diag(B), 0.0, None))
         i = int(np.argmax(axis))
         axis = B[i] / max(axis[i], 1e-12)
         return a * axis / np.linalg.norm(axis)
-    return a / (2.0 * math.sin(a)) * w
+    k = a / (2.0 * math.sin(a))
+    return np.array([k * wx, k * wy, k * wz])
 
 
 def _gains(name: str, value: Any, size: int) -> np.ndarray | None:
