@@ -213,10 +213,11 @@ def run_closed_loop(
         if k == 0:
             controller.reset(meas)
         cmd: Command = controller.compute(meas)
-        if not math.isfinite(float(np.sum(cmd.thrust)) + float(np.sum(cmd.torques))):
+        out = np.abs(np.concatenate((np.ravel(cmd.thrust), np.ravel(cmd.torques))).astype(float))
+        big = float(out.max()) if out.size else 0.0
+        if not math.isfinite(float(out.sum())):
             status, reason = "diverged", f"controller output not finite at t = {k * T:.4f} s"
             break
-        big = max(float(np.max(np.abs(cmd.thrust), initial=0.0)), float(np.max(np.abs(cmd.torques), initial=0.0)))
         if big > COMMAND_ABS_MAX:
             status, reason = "diverged", (f"controller command {big:.3g} (N or N m) beyond {COMMAND_ABS_MAX:g} "
                                           f"at t = {k * T:.4f} s")

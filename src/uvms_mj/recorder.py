@@ -742,6 +742,7 @@ class _RobotChannels:
         self.model = model
         self.layout = Layout.of(model, tip_site)
         self.data = mujoco.MjData(model)
+        self._pose_buf = np.empty((model.nbody - 1, 7))
         self.bodies = list(range(1, model.nbody))
         self.body_names = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) or f"body{b}" for b in self.bodies]
         self.body_name = {b: n for b, n in zip(self.bodies, self.body_names)}
@@ -822,11 +823,14 @@ class _RobotChannels:
         lay = self.layout
         if self.has_tf and "q_true" in row:
             q = np.asarray(row["q_true"], dtype=float)
-            if np.all(np.isfinite(q)):
+            if math.isfinite(float(q.sum())):
                 d = self.data
                 d.qpos[:] = q
                 mujoco.mj_kinematics(self.model, d)
-                pose = np.c_[d.xpos[1:], d.xquat[1:, 1:], d.xquat[1:, :1]]  # x y z, qx qy qz qw
+                pose = self._pose_buf  # x y z, qx qy qz qw per body
+                pose[:, :3] = d.xpos[1:]
+                pose[:, 3:6] = d.xquat[1:, 1:]
+                pose[:, 6] = d.xquat[1:, 0]
                 nums = _enc(pose.ravel().tolist())[1:-1].split(",")
                 parts = []
                 for i, h in enumerate(self._tf_heads):

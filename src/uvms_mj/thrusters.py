@@ -493,25 +493,40 @@ class Allocator:
 # ---------------------------------------------------------------------------- thrust curves
 
 
+class _Poly:
+    """c0 + c1 u + ... + cn u^n by Horner's rule, faster than numpy.polynomial's polyval on small
+    arrays; an odd or even polynomial (every other coefficient zero, as the T200 curve and its
+    derivative) is evaluated in u^2, half the operations. Built once per coefficient tuple."""
+
+    def __init__(self, coeffs) -> None:
+        c = tuple(float(x) for x in coeffs) or (0.0,)
+        self.kind, self.c = "plain", c
+        if len(c) > 2 and not any(c[0::2]):
+            self.kind, self.c = "odd", c[1::2]
+        elif len(c) > 2 and not any(c[1::2]):
+            self.kind, self.c = "even", c[0::2]
+        self.rev = self.c[-2::-1]
+        self.top = self.c[-1]
+
+    def __call__(self, u) -> np.ndarray:
+        u = np.asarray(u, dtype=float)
+        x = u * u if self.kind != "plain" else u
+        y = np.full(u.shape, self.top)
+        for c in self.rev:
+            y = y * x + c
+        return u * y if self.kind == "odd" else y
+
+
+_POLYS: dict[tuple, _Poly] = {}
+
+
 def _horner(coeffs, u: np.ndarray) -> np.ndarray:
-    """c0 + c1 u + ... + cn u^n (Horner; faster than numpy.polynomial's polyval on small arrays).
-    An odd or even polynomial (every other coefficient zero, as the T200 curve and its
-    derivative) is evaluated in u^2, half the operations."""
-    coeffs = tuple(float(c) for c in coeffs)
-    u = np.asarray(u, dtype=float)
-    if len(coeffs) > 2:
-        if not any(coeffs[0::2]):  # odd: u P(u^2)
-            return u * _horner_plain(coeffs[1::2], u * u)
-        if not any(coeffs[1::2]):  # even: P(u^2)
-            return _horner_plain(coeffs[0::2], u * u)
-    return _horner_plain(coeffs, u)
-
-
-def _horner_plain(coeffs: tuple, u: np.ndarray) -> np.ndarray:
-    y = np.full(np.shape(u), coeffs[-1])
-    for c in coeffs[-2::-1]:
-        y = y * u + c
-    return y
+    """Evaluate the polynomial with coefficients c0..cn at u (cached :class:`_Poly`)."""
+    key = tuple(coeffs)
+    p = _POLYS.get(key)
+    if p is None:
+        p = _POLYS[key] = _Poly(key)
+    return p(u)
 
 
 @dataclass(frozen=True)
@@ -808,6 +823,8 @@ class CurveInverse:
         self.u, self.F, self.a, self.b = u, F, a, b
         self.newton = int(newton) if c.kind == "poly" else 0
         self.der = np.polynomial.polynomial.polyder(c.coeffs) if c.kind == "poly" else None
+        if c.kind == "poly":
+            self._F, self._dF = _Poly(c.coeffs), _Poly(self.der)
 
     def __call__(self, F) -> np.ndarray:
         """Commands u for thrusts F [N] (array), clamped to the reachable thrusts."""
@@ -817,9 +834,10 @@ class CurveInverse:
             return np.clip((F - c0) / c1, min(a, b), max(a, b))
         Fc = np.clip(F, self.F[0], self.F[-1])
         u = np.interp(Fc, self.F, self.u)
-        der, coeffs = tuple(self.der), self.curve.coeffs
+        F_of, dF_of = self._F, self._dF
         for _ in range(self.newton):
-            d = _horner(der, u)
-            step = np.where(d != 0, (_horner(coeffs, u) - Fc) / np.where(d != 0, d, 1.0), 0.0)
+            d = dF_of(u)
+            nz = d != 0
+            step = np.where(nz, (F_of(u) - Fc) / np.where(nz, d, 1.0), 0.0)
             u = np.clip(u - step, self.a, self.b)
         return u

@@ -215,6 +215,10 @@ class RAC(Controller):
         tip_orientation: also control the tip's orientation (floating robots; needs 6 arm dofs
             for full rank, else the DLS/pseudo-inverse handles the deficiency).
         null_kp, null_kd: null-space posture gains [1/s^2, 1/s] for a redundant arm.
+        observer_arm, tf_arm: (rac_dob; our extension, off by default) the same observer
+            (Eq. 14 corrected, Fig. 3(b)) on the arm's rows, with filter time constant tf_arm
+            (default tf): f_M_hat = F(s)(u_M - f_tM + g M_MM phi_dot) - g M_MM phi_dot,
+            f_tM = M_MB x0_ddot_d + h_M, the torques clipped to the motors' ranges.
     """
 
     observer = False
@@ -245,6 +249,8 @@ class RAC(Controller):
         null_kp: float = 4.0,
         null_kd: float = 4.0,
         arm_trajectory=None,
+        observer_arm: bool = False,
+        tf_arm: float | None = None,
     ) -> None:
         if robot is None:
             from ..nominal import NominalModel
@@ -317,6 +323,14 @@ class RAC(Controller):
         self.observer_input = observer_input
         self.filter = LowPassZOH(self.T, self.tf, size=nb)
         self.g = 1.0 / self.tf if observer_gain == "1/Tf" else (1.0 - self.filter.h) / self.T
+        # Our extension (off by default, not in the paper): the same observer on the arm's rows.
+        if not isinstance(observer_arm, bool):
+            raise ControllerError(f"observer_arm = {observer_arm!r} must be true or false")
+        self.observer_arm = bool(observer_arm) and self.observer
+        self.tf_arm = self.tf if tf_arm is None else check_positive("tf_arm", tf_arm)
+        n_arm = m.nv - nb
+        self.filter_arm = LowPassZOH(self.T, self.tf_arm, size=n_arm)
+        self.g_arm = 1.0 / self.tf_arm if observer_gain == "1/Tf" else (1.0 - self.filter_arm.h) / self.T
         # thrusters: body-frame allocation on the rows the base can move
         if allocation not in ("auto", "clip", "wls"):
             raise ControllerError(f"allocation = {allocation!r}; allowed: auto, clip, wls")
@@ -461,6 +475,7 @@ class RAC(Controller):
         self._J_prev = self._jacobian(jac)
         b = self.base_dofs
         self.filter.reset(self.g * M[np.ix_(b, b)] @ qd0[b])  # f_E_hat(0) = 0
+        self.filter_arm.reset(self.g_arm * M[np.ix_(a, a)] @ qd0[a])
 
     def _velocity(self, q: np.ndarray) -> np.ndarray:
         """Backward difference of the measured coordinates as qvel (quaternions included)."""
@@ -542,7 +557,9 @@ class RAC(Controller):
         ix = self._ix
         M_BB, M_BM = M[ix["bb"]], M[ix["ba"]]
         M_MB, M_MM = M[ix["ab"]], M[ix["aa"]]
-        u_M = M_MB @ qdd_d[b] + M_MM @ qdd_d[a] + h[a]
+        f_tM = M_MB @ qdd_d[b] + h[a]
+        f_m_hat = (self.filter_arm.output() - self.g_arm * M_MM @ qd[a]) if self.observer_arm else None
+        u_M = M_MM @ qdd_d[a] + f_tM + (f_m_hat if f_m_hat is not None else 0.0)
         f_t = M_BM @ qdd_d[a] + h[b]  # Eq. 13
         f_e_hat = self.filter.output() - self.g * M_BB @ qd[b] if self.observer else np.zeros(b.size)
         u_B = M_BB @ qdd_d[b] + f_t + f_e_hat  # Eq. 15
@@ -551,6 +568,11 @@ class RAC(Controller):
             # Eq. 14 corrected (Fig. 3(b)): w = u_B - f_t + g M_BB x0_dot; z(k+1) = h z + (1-h) w.
             applied = u_applied if self.observer_input == "allocated" else u_B
             self.filter.advance(applied - f_t + self.g * M_BB @ qd[b])
+        if self.observer_arm:
+            # the same structure on the arm rows, with the torques the motors can give
+            tau = u_M.copy()
+            tau[self._motor_idx] = np.clip(u_M[self._motor_idx], r.motor_lo, r.motor_hi)
+            self.filter_arm.advance(tau - f_tM + self.g_arm * M_MM @ qd[a])
 
         self._pd_prev, self._e_p_prev = p_d, e_p
         self._q_prev, self._p_prev, self._J_prev = q, p, J
@@ -558,6 +580,8 @@ class RAC(Controller):
         signals = {"e_p": e_p, "e_v": e_v, "v_desired": v_d, "a_desired": a_d, "qdd_desired": qdd_d,
                    "u_B": u_B, "u_B_applied": u_applied, "f_E_hat": f_e_hat, "manipulability": manip,
                    "singular_phase": self.singular.phase, "dls_active": dls, "thrust_saturated": saturated}
+        if f_m_hat is not None:
+            signals["f_M_hat"] = f_m_hat
         if self.free:
             signals["base_desired"] = np.concatenate((p_d[0][:3], _mat_to_quat(p_d[1][0])))
             signals["tip_desired"] = p_d[0][3:6].copy()
