@@ -19,8 +19,8 @@ Tasks, highest priority first (Antonelli ch. 9, "task-priority inverse kinematic
    J_2 = the vehicle's world angular-velocity rows (= [0 R 0]);
 3. vehicle position p_v (world, 3) and arm posture q (n joints), stacked, J_3 = [J_pv; 0 S],
    the posture rows scaled by ``posture_weight`` (a row weight in the task-3 least squares);
-   with ``posture_level = "below_position"`` the posture is a 4th level of its own, below the
-   vehicle position.
+   by default (``posture_level = "below_position"``) the posture is a 4th level of its own,
+   below the vehicle position.
 
 Each task's reference velocity is the closed-loop inverse kinematics (CLIK) one (Antonelli ch. 9,
 "kinematic control", sigma_dot_r = sigma_dot_d + Lambda sigma~), on the MEASURED task values:
@@ -246,9 +246,10 @@ class TaskPriority(Controller):
             least squares [m/rad] (> 0): where the two conflict (the arm's position joints are
             fixed by the tip once the vehicle is), task 3 settles where gain-weighted position
             and posture errors balance, |e_pos| ~ posture_weight |e_posture|.
-        posture_level: "with_position" (the posture rows stacked with the vehicle position in
-            task 3, the brief's hierarchy) | "below_position" (a 4th, lowest level: the vehicle
-            position is held exactly, kinematically, the posture only uses what is left).
+        posture_level: "below_position" (default: a 4th, lowest level: the vehicle position is
+            held exactly, kinematically, the posture only uses what is left) | "with_position"
+            (the posture rows stacked with the vehicle position in task 3: the vehicle then gives
+            way by about posture_weight times the posture error, 4-5 cm in the 3-D studies).
         priority_form: "siciliano_slotine" | "singularity_robust".
         dls_threshold: singular value below which the task inverses are damped (Jacobian units).
         dls_damping: lambda_max of the damped least squares (same units).
@@ -257,7 +258,9 @@ class TaskPriority(Controller):
         damping_ratio: of every low-level loop.
         kp, kd: explicit low-level gains (1 or nv numbers, per qvel dof: N/m, N m/rad, N m/rad;
             N s/m, N m s/rad), overriding the bandwidth ones.
-        reference_lead_limit: largest |q_r (-) q| per dof [m or rad] (anti-windup).
+        reference_lead_limit: largest |q_r (-) q| per dof [m or rad] (anti-windup; default 1:
+            0.1 bounded the loop's integral action below the moment of a 1 % buoyancy error,
+            leaving a 4 deg attitude offset in the sweep study).
         feedforward: add the nominal hold force.
     """
 
@@ -265,11 +268,11 @@ class TaskPriority(Controller):
 
     def __init__(self, robot: NominalRobot, trajectory=None, arm_trajectory: JointTrajectory | None = None,
                  T: float = DEFAULT_T, gain_tip: float = 1.0, gain_attitude: float = 1.0, gain_position: float = 0.5,
-                 gain_posture: float = 0.5, posture_weight: float = 0.1, posture_level: str = "with_position",
+                 gain_posture: float = 0.5, posture_weight: float = 0.1, posture_level: str = "below_position",
                  priority_form: str = "siciliano_slotine",
                  dls_threshold: float = 1e-2, dls_damping: float = 5e-2, rank_tol: float = 1e-10,
                  bandwidth_base: float = 2.0, bandwidth_attitude: float = 3.0, bandwidth_joints: float = 10.0,
-                 damping_ratio: float = 1.0, kp=None, kd=None, reference_lead_limit: float = 0.1,
+                 damping_ratio: float = 1.0, kp=None, kd=None, reference_lead_limit: float = 1.0,
                  feedforward: bool = True) -> None:
         if not isinstance(robot, NominalRobot):
             raise ControllerError("task_priority needs robot= a NominalRobot (a floating robot scenario)")
