@@ -762,6 +762,10 @@ class _RobotChannels:
             self.tf_id = channel(TOPIC_TF, "foxglove.FrameTransforms", SCHEMAS["foxglove.FrameTransforms"])
             self._tf_heads = ['{"timestamp":%%s,"parent_frame_id":"world","child_frame_id":%s,'
                               % json.dumps(n).replace("%", "%%") for n in self.body_names]
+            # One template for the whole message: "\0" stands for the stamp, %s for the numbers.
+            self._tf_tmpl = '{"transforms":[' + ",".join(
+                (h % "\0") + '"translation":{"x":%s,"y":%s,"z":%s},"rotation":{"x":%s,"y":%s,"z":%s,"w":%s}}'
+                for h in self._tf_heads) + "]}"
         self.has_joints = self.has_tf and len(lay.joint_names) > 0
         if self.has_joints:
             self.js_id = channel(TOPIC_JOINTS, "foxglove.JointStates", SCHEMAS["foxglove.JointStates"])
@@ -775,6 +779,8 @@ class _RobotChannels:
             self.thr_id = channel(TOPIC_THRUSTERS, "uvms_mj.Thrusters",
                                   _thrusters_schema(lay.thruster_names, self.thr_fields))
             self._thr_names = [json.dumps(n) for n in lay.thruster_names]
+            one = "{" + ",".join('"%s":%%s' % f for f in self.thr_fields) + "}"
+            self._thr_tmpl = ",".join(n.replace("%", "%%") + ":" + one for n in self._thr_names) + "}"
         scene_id = channel(TOPIC_SCENE, "foxglove.SceneUpdate", SCHEMAS["foxglove.SceneUpdate"])
         writer.add_message(scene_id, ns, _dumps(self.scene(stamp)), ns, 0)
 
@@ -832,12 +838,8 @@ class _RobotChannels:
                 pose[:, 3:6] = d.xquat[1:, 1:]
                 pose[:, 6] = d.xquat[1:, 0]
                 nums = _enc(pose.ravel().tolist())[1:-1].split(",")
-                parts = []
-                for i, h in enumerate(self._tf_heads):
-                    v = nums[7 * i: 7 * i + 7]
-                    parts.append(h % stamp + '"translation":{"x":%s,"y":%s,"z":%s},"rotation":{"x":%s,"y":%s,'
-                                 '"z":%s,"w":%s}}' % tuple(v))
-                w.add_message(self.tf_id, ns, ('{"transforms":[' + ",".join(parts) + "]}").encode(), ns, k)
+                msg = self._tf_tmpl.replace("\0", stamp) % tuple(nums)
+                w.add_message(self.tf_id, ns, msg.encode(), ns, k)
             if self.has_joints:
                 pos = _enc(q[lay.joint_qadr].tolist())[1:-1].split(",")
                 vel = None
@@ -848,13 +850,19 @@ class _RobotChannels:
                                   for i, n in enumerate(self._js_names))
                 w.add_message(self.js_id, ns, ('{"timestamp":%s,"joints":[%s]}' % (stamp, joints)).encode(), ns, k)
         if self.thr_fields:
-            cols = [_enc(np.asarray(row[self._thr_sig[f]], dtype=float).tolist())[1:-1].split(",")
-                    if self._thr_sig[f] in row else None for f in self.thr_fields]
-            items = []
-            for i, n in enumerate(self._thr_names):
-                vals = ",".join('"%s":%s' % (f, c[i]) for f, c in zip(self.thr_fields, cols) if c is not None)
-                items.append('%s:{%s}' % (n, vals))
-            w.add_message(self.thr_id, ns, (head + "," + ",".join(items) + "}").encode(), ns, k)
+            if all(self._thr_sig[f] in row for f in self.thr_fields):
+                cols = [_enc(np.asarray(row[self._thr_sig[f]], dtype=float).tolist())[1:-1].split(",")
+                        for f in self.thr_fields]
+                args = tuple(x for vals in zip(*cols) for x in vals)  # per thruster: its fields in order
+                w.add_message(self.thr_id, ns, (head + "," + self._thr_tmpl % args).encode(), ns, k)
+            else:
+                cols = [_enc(np.asarray(row[self._thr_sig[f]], dtype=float).tolist())[1:-1].split(",")
+                        if self._thr_sig[f] in row else None for f in self.thr_fields]
+                items = []
+                for i, n in enumerate(self._thr_names):
+                    vals = ",".join('"%s":%s' % (f, c[i]) for f, c in zip(self.thr_fields, cols) if c is not None)
+                    items.append('%s:{%s}' % (n, vals))
+                w.add_message(self.thr_id, ns, (head + "," + ",".join(items) + "}").encode(), ns, k)
 
 
 class OutputPathError(ValueError):
