@@ -94,7 +94,7 @@ def test_redundant_arm_solution_satisfies_the_task_and_weights():
 def test_tip_circle_is_tracked_in_3d():
     """A 5 cm circle (20 s per turn) in still water with the exact model: the RAC error
     dynamics are those of a sampled loop with the thruster lag; the tip stays within 1 mm."""
-    from uvms_mj.robot_scenario import _Shifted
+    from uvms_mj.trajectories import Shifted as _Shifted
     from uvms_mj.trajectories import Circle
 
     p = _plant()

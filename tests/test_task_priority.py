@@ -16,7 +16,7 @@ from uvms_mj.controllers.task_priority import null_space_projector, task_priorit
 from uvms_mj.loop import SensorModel, run_closed_loop
 from uvms_mj.nominal_robot import NominalRobot
 from uvms_mj.robot import InitialState, RobotPlant
-from uvms_mj.robot_scenario import _Shifted
+from uvms_mj.trajectories import Shifted as _Shifted
 from uvms_mj.trajectories import Circle
 
 ROBOT = "bluerov2_alpha"

@@ -17,6 +17,7 @@ import numpy as np
 
 from .controllers.base import Command, Controller, Measurement
 from .plant import DivergenceError, Plant, mujoco_warnings
+from .rotations import quat_from_rotvec, quat_mul
 
 
 #: A thrust or joint-torque command beyond this [N, N m] is taken as divergence of the
@@ -90,21 +91,6 @@ def controller_name(controller: Controller) -> str:
     return str(getattr(controller, "name", "") or type(controller).__name__)
 
 
-def _small_rotation(rv: np.ndarray) -> np.ndarray:
-    """Quaternion (w, x, y, z) of the rotation vector rv [rad]."""
-    a = float(np.linalg.norm(rv))
-    if a < 1e-300:
-        return np.array([1.0, 0.0, 0.0, 0.0])
-    return np.concatenate(([math.cos(a / 2)], math.sin(a / 2) * rv / a))
-
-
-def _quat_mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    w1, x1, y1, z1 = a
-    w2, x2, y2, z2 = b
-    return np.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                     w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
-
-
 def measure_robot(plant, layout, sensor: SensorModel, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray | None]:
     """(qpos, qvel or None) as measured on a floating robot (:class:`uvms_mj.robot.RobotPlant`).
 
@@ -122,7 +108,7 @@ def measure_robot(plant, layout, sensor: SensorModel, rng: np.random.Generator) 
     if sensor.position_noise:
         q[a:a + 3] += rng.normal(0.0, sensor.position_noise, 3)
     if att_noise:
-        qq = _quat_mul(q[a + 3:a + 7], _small_rotation(rng.normal(0.0, att_noise, 3)))
+        qq = quat_mul(q[a + 3:a + 7], quat_from_rotvec(rng.normal(0.0, att_noise, 3)))
         q[a + 3:a + 7] = qq / np.linalg.norm(qq)
     ja = layout.joint_qadr
     if joint_noise and len(ja):

@@ -158,6 +158,37 @@ def _resolve_backend(requested: str | None, terms: HydroTerms) -> bool:
     return _build.register_plugins()
 
 
+def water_terms(terms: HydroTerms) -> str:
+    """The ``uvms.water`` ``terms`` word list for :class:`HydroTerms` (damping and
+    Froude-Krylov always on)."""
+    words = ["damping", "froude_krylov"]
+    if terms.added_mass != "off":
+        words.append("added_mass")
+    if terms.drag == "strip":
+        words.append("strips")
+    if terms.buoyancy:
+        words.append("buoyancy")
+    return " ".join(sorted(words))
+
+
+def set_integration(m: mujoco.MjModel, timestep: float | None, integrator: str | None) -> None:
+    """Override a compiled model's timestep [s] and integrator (by name, e.g. "rk4"); None keeps
+    the model's.
+
+    Raises:
+        ParameterError: a timestep that is not finite and > 0, an unknown integrator name."""
+    if timestep is not None:
+        if not (math.isfinite(timestep) and timestep > 0):
+            raise ParameterError(f"timestep = {timestep!r} s must be finite and > 0")
+        m.opt.timestep = timestep
+    if integrator is not None:
+        names = {k.removeprefix("mjINT_").lower(): v for k, v in mujoco.mjtIntegrator.__members__.items()}
+        key = integrator.lower()
+        if key not in names:
+            raise ParameterError(f"integrator = {integrator!r}; allowed: {', '.join(names)}")
+        m.opt.integrator = names[key]
+
+
 # --------------------------------------------------------------------------- plant
 
 
@@ -221,29 +252,13 @@ class Plant:
                 cur3[: cur.size] = cur
                 _pm.set_water(spec, current=_pm.fmt(cur3))
                 spec.option.wind = cur3  # MuJoCo's own fluid model (drag="mujoco") sees it too
-            words = ["damping", "froude_krylov"]
-            if terms.added_mass != "off":
-                words.append("added_mass")
-            if terms.drag == "strip":
-                words.append("strips")
-            if terms.buoyancy:
-                words.append("buoyancy")
-            _pm.set_water(spec, terms=" ".join(sorted(words)))
+            _pm.set_water(spec, terms=water_terms(terms))
             self.model = _pm.compile_spec(spec, native=native, source=path.name)
         except _pm.ModelError as exc:
             raise ParameterError(str(exc)) from None
         self.model_path = path
         m = self.model
-        if timestep is not None:
-            if not (math.isfinite(timestep) and timestep > 0):
-                raise ParameterError(f"timestep = {timestep!r} s must be finite and > 0")
-            m.opt.timestep = timestep
-        if integrator is not None:
-            names = {k.removeprefix("mjINT_").lower(): v for k, v in mujoco.mjtIntegrator.__members__.items()}
-            key = integrator.lower()
-            if key not in names:
-                raise ParameterError(f"integrator = {integrator!r}; allowed: {', '.join(names)}")
-            m.opt.integrator = names[key]
+        set_integration(m, timestep, integrator)
         #: The hydrodynamics backend in use: "native" or "python".
         self.backend = "native" if native else "python"
         self.hydro_info = _pm.hydro_of(m)

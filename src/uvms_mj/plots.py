@@ -460,7 +460,7 @@ def _quat_rows(q: np.ndarray) -> np.ndarray:
 def _rpy_deg(quat: np.ndarray) -> np.ndarray:
     """(roll, pitch, yaw) [deg] (N, 3) of quaternions (N, 4) (z-y-x, :func:`uvms_mj.robot.rpy_from_quat`),
     roll and yaw unwrapped (continuous through +-180 deg)."""
-    from .robot import rpy_from_quat
+    from .rotations import rpy_from_quat
 
     out = np.full((len(quat), 3), np.nan)
     for k, qk in enumerate(quat):

@@ -837,7 +837,8 @@ def _robot_scene_model(robot: dict, q_log: np.ndarray, width: int, height: int,
     import mujoco
 
     from .params import ParameterError
-    from .robot import Layout, compile_robot_spec, rpy_from_quat
+    from .robot import Layout, compile_robot_spec
+    from .rotations import rpy_from_quat
 
     path = _robot_file(robot, model_path)
     layout_meta = robot.get("layout")

@@ -37,7 +37,8 @@ import numpy as np
 from .hydro import HydroTerms
 from .params import ParameterError
 from .physics import model as _pm
-from .plant import Plant, _resolve_backend, install_mujoco_warning_handler, models_dir
+from .rotations import quat_from_rpy, rpy_from_quat  # noqa: F401  (part of this module's API)
+from .plant import Plant, _resolve_backend, install_mujoco_warning_handler, models_dir, set_integration, water_terms
 from .thrusters import CurveInverse, thruster_actuators, thruster_curves
 
 __all__ = [
@@ -112,28 +113,6 @@ def robot_path(robot: str | Path, base_dir: str | Path | None = None) -> Path:
     hint = f" (did you mean {close[0]!r}?)" if close else ""
     raise ParameterError(f"robot = {key!r}: neither a built-in robot{hint} ({', '.join(BUILTIN_ROBOTS)}) "
                          "nor an existing MJCF file")
-
-
-# --------------------------------------------------------------------------- rotations
-
-
-def quat_from_rpy(roll: float, pitch: float, yaw: float) -> np.ndarray:
-    """Unit quaternion (w, x, y, z) of R = Rz(yaw) Ry(pitch) Rx(roll) [rad]."""
-    cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-    cp, sp = math.cos(pitch / 2), math.sin(pitch / 2)
-    cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-    return np.array([cr * cp * cy + sr * sp * sy, sr * cp * cy - cr * sp * sy,
-                     cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy])
-
-
-def rpy_from_quat(q: Sequence[float]) -> np.ndarray:
-    """(roll, pitch, yaw) [rad] of a quaternion (w, x, y, z) (z-y-x convention, as
-    :func:`quat_from_rpy`; pitch in [-pi/2, pi/2])."""
-    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
-    roll = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))
-    pitch = math.asin(max(-1.0, min(1.0, 2 * (w * y - z * x))))
-    yaw = math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
-    return np.array([roll, pitch, yaw])
 
 
 # --------------------------------------------------------------------------- layout
@@ -572,14 +551,7 @@ class RobotPlant(Plant):
                 if cur.shape != (3,) or not np.all(np.isfinite(cur)):
                     raise ParameterError(f"current = {current!r} must be 3 finite numbers (m/s, world frame)")
                 _pm.set_water(spec, current=_pm.fmt(cur))
-            words = ["damping", "froude_krylov"]
-            if terms.added_mass != "off":
-                words.append("added_mass")
-            if terms.drag == "strip":
-                words.append("strips")
-            if terms.buoyancy:
-                words.append("buoyancy")
-            _pm.set_water(spec, terms=" ".join(sorted(words)))
+            _pm.set_water(spec, terms=water_terms(terms))
             if payload is not None:
                 site = payload.site or tip_site or next(
                     (x.name for x in spec.sites if x.name and x.name.endswith("tip")), None)
@@ -593,15 +565,7 @@ class RobotPlant(Plant):
         self.model = compile_robot_spec(path, overrides, native=native, edit=edit)
         self.model_path = path
         m = self.model
-        if timestep is not None:
-            if not (math.isfinite(timestep) and timestep > 0):
-                raise ParameterError(f"timestep = {timestep!r} s must be finite and > 0")
-            m.opt.timestep = timestep
-        if integrator is not None:
-            names = {k.removeprefix("mjINT_").lower(): v for k, v in mujoco.mjtIntegrator.__members__.items()}
-            if integrator.lower() not in names:
-                raise ParameterError(f"integrator = {integrator!r}; allowed: {', '.join(names)}")
-            m.opt.integrator = names[integrator.lower()]
+        set_integration(m, timestep, integrator)
         self.backend = "native" if native else "python"
         self.hydro_info = _pm.hydro_of(m)
         self.params = None  # the paper robot's RobotParams; none here

@@ -68,7 +68,8 @@ from .hydro import HydroTerms
 from .loop import RunResult, run_closed_loop
 from .nominal_robot import JointTrajectory, NominalRobot
 from .params import ParameterError
-from .robot import InitialState, Layout, RobotPlant, compile_robot_spec, quat_from_rpy, robot_path
+from .robot import InitialState, Layout, RobotPlant, compile_robot_spec, robot_path
+from .rotations import quat_from_rpy
 
 #: Default controller period [s]: 50 Hz, a whole multiple of the BlueROV2 models' 2 ms step
 #: (the paper's 1/60 s is not); every controller of a robot scenario runs at it.
@@ -421,19 +422,8 @@ def _check_params(name: str, params: dict) -> list:
 def _try_create(name: str, params: dict, path: Path) -> list:
     """The controller's own parameter errors, each attributed to the parameter that causes it."""
     nominal = _nominal_for(str(path))
-
-    def attempt(kw: dict) -> str | None:
-        try:
-            create(name, robot=nominal, arm_trajectory=None, **kw)
-        except (ControllerError, ValueError, TypeError) as exc:
-            return str(exc)
-        return None
-
-    err = attempt(params)
-    if err is None:
-        return []
-    out = [(("controller", "params", k), e, v) for k, v in params.items() if (e := attempt({k: v})) is not None]
-    return out or [(("controller", "params"), err, params)]
+    found = _S.creation_errors(lambda kw: create(name, robot=nominal, arm_trajectory=None, **kw), params)
+    return [(("controller", "params") + sub, msg, v) for sub, msg, v in found]
 
 
 _NOMINAL: dict[str, NominalRobot] = {}
@@ -452,47 +442,15 @@ def controller_period(sc: RobotScenario) -> float:
     return float(sc.control_period)
 
 
-class _Shifted:
-    """A trajectory translated by a constant offset (world frame)."""
-
-    def __init__(self, base, offset: np.ndarray) -> None:
-        self.base, self.offset = base, np.asarray(offset, dtype=float)
-
-    def __repr__(self) -> str:
-        return f"{type(self.base).__name__} shifted by {np.round(self.offset, 6).tolist()} m"
-
-    def position(self, t):
-        return np.asarray(self.base.position(t)) + self.offset
-
-    def velocity(self, t):
-        return self.base.velocity(t)
-
-    def acceleration(self, t):
-        return self.base.acceleration(t)
-
-    @property
-    def duration(self) -> float:
-        return self.base.duration
-
-    @property
-    def has_orientation(self) -> bool:
-        return self.base.has_orientation
-
-    def orientation(self, t):
-        return self.base.orientation(t)
-
-
 def trajectory_of(sc: RobotScenario, tip0: np.ndarray):
     """The scenario's end-effector trajectory (None: none), shifted to start at ``tip0`` (the
     initial tip position, world) with trajectory_origin "tip"."""
     if sc.trajectory is None:
         return None
-    from .trajectories import make_trajectory
+    from .trajectories import make_trajectory, starting_at
 
     tr = make_trajectory(sc.trajectory, base_dir=sc.base_dir)
-    if sc.trajectory_origin == "tip":
-        tr = _Shifted(tr, np.asarray(tip0, dtype=float) - np.asarray(tr.position(0.0), dtype=float))
-    return tr
+    return starting_at(tr, tip0) if sc.trajectory_origin == "tip" else tr
 
 
 def robot_info(sc: RobotScenario, plant: RobotPlant | None = None) -> dict:

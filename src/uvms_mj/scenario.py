@@ -330,9 +330,17 @@ def _check_controller_params(name: str, params: dict) -> list[tuple[tuple, str, 
     if issues:
         return issues
 
+    return creation_errors(lambda kw: create(name, trajectory=_PROBE_PATH, nominal=_file_nominal(), **kw), params)
+
+
+def creation_errors(make: Callable[[dict], Any], params: dict) -> list[tuple[tuple, str, Any]]:
+    """The errors ``make(params)`` raises (ControllerError, ValueError, TypeError), each
+    attributed to the parameter that causes it alone (found by calling ``make`` with it alone):
+    ((key,), message, value) items, or ((), message, params) when no single parameter does."""
+
     def attempt(kwargs: dict) -> str | None:
         try:
-            create(name, trajectory=_PROBE_PATH, nominal=_file_nominal(), **kwargs)
+            make(kwargs)
         except (ControllerError, ValueError, TypeError) as exc:
             return str(exc)
         return None
@@ -340,10 +348,7 @@ def _check_controller_params(name: str, params: dict) -> list[tuple[tuple, str, 
     err = attempt(params)
     if err is None:
         return []
-    for key, value in params.items():
-        e = attempt({key: value})
-        if e is not None:
-            issues.append(((key,), e, value))
+    issues = [((key,), e, value) for key, value in params.items() if (e := attempt({key: value})) is not None]
     return issues or [((), err, params)]
 
 
@@ -1073,11 +1078,9 @@ def build(scenario: Scenario) -> tuple[Plant, Any]:
         path = StraightLine(start=tuple(float(v) for v in start), target=tuple(float(v) for v in target),
                             cruise_speed=tr.cruise_speed, accel=tr.accel, t_start=tr.t_start)
         if tr.curve is not None:
-            from .robot_scenario import _Shifted
-            from .trajectories import make_trajectory
+            from .trajectories import make_trajectory, starting_at
 
-            curve = make_trajectory(tr.curve)
-            path = _Shifted(curve, np.r_[start, 0.0] - np.asarray(curve.position(0.0), dtype=float))
+            path = starting_at(make_trajectory(tr.curve), np.r_[start, 0.0])
         params = dict(scenario.controller.params)
         ref = scenario.controller.base_reference
         if ref == "truth":

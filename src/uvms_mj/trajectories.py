@@ -55,9 +55,11 @@ __all__ = [
     "Lemniscate",
     "Helix",
     "CsvTrajectory",
+    "Shifted",
     "KINDS",
     "make_trajectory",
     "min_jerk",
+    "starting_at",
     "write_csv",
 ]
 
@@ -963,6 +965,42 @@ def _keys(cls: type) -> tuple[tuple[str, ...], tuple[str, ...]]:
         f.name for f in fs if f.default is MISSING and f.default_factory is MISSING and f.name not in _ONE_OF
     )
     return keys, req
+
+
+class Shifted(Trajectory):
+    """A trajectory translated by a constant offset [m] (world frame): position + offset, the
+    same velocity, acceleration and orientation."""
+
+    def __init__(self, base: Trajectory, offset: Any) -> None:
+        self.base, self.offset = base, np.asarray(offset, dtype=float)
+
+    def __repr__(self) -> str:
+        return f"{type(self.base).__name__} shifted by {np.round(self.offset, 6).tolist()} m"
+
+    def position(self, t: Any) -> np.ndarray:
+        return np.asarray(self.base.position(t)) + self.offset
+
+    def velocity(self, t: Any) -> np.ndarray:
+        return self.base.velocity(t)
+
+    def acceleration(self, t: Any) -> np.ndarray:
+        return self.base.acceleration(t)
+
+    @property
+    def duration(self) -> float:
+        return self.base.duration
+
+    @property
+    def has_orientation(self) -> bool:
+        return self.base.has_orientation
+
+    def orientation(self, t: Any) -> np.ndarray | None:
+        return self.base.orientation(t)
+
+
+def starting_at(trajectory: Trajectory, point: Any) -> Shifted:
+    """``trajectory`` translated so that it starts (t = 0) at ``point`` [m, world]."""
+    return Shifted(trajectory, np.asarray(point, dtype=float) - np.asarray(trajectory.position(0.0), dtype=float))
 
 
 def make_trajectory(spec: Mapping[str, Any], *, base_dir: str | Path | None = None) -> Trajectory:

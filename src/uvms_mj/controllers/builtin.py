@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -62,25 +63,32 @@ class SingularHandler:
     velocity and holds it; 2 release: from k2, the first sample after k1 with |det B| > js_high,
     it ramps back to 0 over n samples, then phase 0 again. js_high = js_low is the paper; a
     larger js_high adds hysteresis (our option against noise re-triggering).
+
+    For any robot (``rac``), ``detb`` is the arm's manipulability, ``v_cruise`` may be a callable
+    k -> velocity (evaluated at k1: the trajectory's velocity then) and ``size`` the number of
+    base position axes (default: the size of ``v_cruise``).
     """
 
     js_low: float
     js_high: float
     n: int
-    v_cruise: np.ndarray
+    v_cruise: Any
+    size: int | None = None
 
     def __post_init__(self) -> None:
+        size = self.size if self.size is not None else int(np.size(self.v_cruise))
         self.phase = 0
         self.k_event = 0
-        self.v_from = np.zeros(2)
-        self.v_to = np.zeros(2)
-        self.v = np.zeros(2)
+        self.v_from = np.zeros(size)
+        self.v_to = np.zeros(size)
+        self.v = np.zeros(size)
 
     def update(self, k: int, detb: float) -> np.ndarray:
         """Base desired linear velocity (world, m/s) for the interval [k, k+1)."""
         a = abs(detb)
         if self.phase != 1 and a < self.js_low:  # k1 (again, if it re-enters during release)
-            self.phase, self.k_event, self.v_from, self.v_to = 1, k, self.v.copy(), np.array(self.v_cruise, dtype=float)
+            v = self.v_cruise(k) if callable(self.v_cruise) else self.v_cruise
+            self.phase, self.k_event, self.v_from, self.v_to = 1, k, self.v.copy(), np.array(v, dtype=float)
         elif self.phase == 1 and a > self.js_high:  # k2
             self.phase, self.k_event, self.v_from, self.v_to = 2, k, self.v.copy(), np.zeros(2)
         frac = min(1.0, (k - self.k_event + 1) / self.n)
@@ -88,6 +96,31 @@ class SingularHandler:
         if self.phase == 2 and frac >= 1.0:
             self.phase = 0
         return self.v
+
+
+def check_rac_settings(ctrl, js, js_high, n_ramp, dls_threshold, dls_damping, tf, observer_gain,
+                       observer_input) -> None:
+    """Check the RAC settings shared by every RAC implementation and set them on ``ctrl``: js,
+    js_high (Eq. 12 thresholds), n_ramp, dls_threshold, dls_damping, tf, observer_input (the
+    observer gain's name is checked; the caller computes g from it).
+
+    Raises:
+        ControllerError: naming the parameter, its value and what is allowed."""
+    ctrl.js = check_positive("js", js)
+    ctrl.js_high = ctrl.js if js_high is None else check_positive("js_high", js_high)
+    if ctrl.js_high < ctrl.js:
+        raise ControllerError(f"js_high = {js_high!r} must be >= js = {js!r}")
+    if int(n_ramp) != n_ramp or n_ramp < 1:
+        raise ControllerError(f"n_ramp = {n_ramp!r} must be an integer >= 1")
+    ctrl.n_ramp = int(n_ramp)
+    ctrl.dls_threshold = check_positive("dls_threshold", dls_threshold)
+    ctrl.dls_damping = check_positive("dls_damping", dls_damping)
+    ctrl.tf = check_positive("tf", tf)
+    if observer_gain not in ("1/Tf", "(1-h)/T"):
+        raise ControllerError(f"observer_gain = {observer_gain!r}; allowed: 1/Tf, (1-h)/T")
+    if observer_input not in ("allocated", "commanded"):
+        raise ControllerError(f"observer_input = {observer_input!r}; allowed: allocated, commanded")
+    ctrl.observer_input = observer_input
 
 
 def _inv2(a: float, b: float, c: float, d: float) -> np.ndarray:
@@ -158,27 +191,13 @@ class RAC(Controller):
         self.T = check_positive("T", T)
         self.gamma = check_gains("gamma", gamma)
         self.lam = check_gains("lambda", lam)
-        self.js = check_positive("js", js)
-        self.js_high = self.js if js_high is None else check_positive("js_high", js_high)
-        if self.js_high < self.js:
-            raise ControllerError(f"js_high = {js_high!r} must be >= js = {js!r}")
-        if int(n_ramp) != n_ramp or n_ramp < 1:
-            raise ControllerError(f"n_ramp = {n_ramp!r} must be an integer >= 1")
-        self.n_ramp = int(n_ramp)
+        check_rac_settings(self, js, js_high, n_ramp, dls_threshold, dls_damping, tf, observer_gain, observer_input)
         self.base_reference = None if base_reference is None else np.asarray(base_reference, dtype=float)
         if self.base_reference is not None and (
             self.base_reference.shape != (3,) or not np.all(np.isfinite(self.base_reference))
         ):
             raise ControllerError(f"base_reference = {base_reference!r} must be 3 finite numbers")
-        self.dls_threshold = check_positive("dls_threshold", dls_threshold)
-        self.dls_damping = check_positive("dls_damping", dls_damping)
         self.allocator = Allocator(self.nominal.params.thrusters, allocation)
-        self.tf = check_positive("tf", tf)
-        if observer_gain not in ("1/Tf", "(1-h)/T"):
-            raise ControllerError(f"observer_gain = {observer_gain!r}; allowed: 1/Tf, (1-h)/T")
-        if observer_input not in ("allocated", "commanded"):
-            raise ControllerError(f"observer_input = {observer_input!r}; allowed: allocated, commanded")
-        self.observer_input = observer_input
         self.filter = LowPassZOH(self.T, self.tf)
         self.g = 1.0 / self.tf if observer_gain == "1/Tf" else (1.0 - self.filter.h) / self.T
         self.geom = self.nominal.geometry

@@ -42,7 +42,7 @@ clip for a square allocation, wls otherwise).
 from __future__ import annotations
 
 import math
-from typing import Any, Callable
+from typing import Any
 
 import mujoco
 import numpy as np
@@ -50,54 +50,12 @@ import numpy as np
 from ..nominal_robot import NominalRobot
 from ..thrusters import Allocator
 from .base import Command, Controller, ControllerError, Measurement, check_positive, register
-from .builtin import PAPER_JS, PAPER_T, PAPER_TF, LowPassZOH
-from .station_pid import quat_to_mat, rotation_log
+from .builtin import PAPER_JS, PAPER_T, PAPER_TF, LowPassZOH, SingularHandler, check_rac_settings
+from ..rotations import mat_to_quat, quat_to_mat, rotation_log
 
 #: Default gains per task block (the paper's Gamma = Lambda = diag(0.3, 0.3, 0.2, 0.2, 0.2) on
 #: its planar task: 0.3 for the base position, 0.2 for the base rotation and the tip).
 GAIN_BASE_POSITION, GAIN_BASE_ROTATION, GAIN_TIP = 0.3, 0.2, 0.2
-
-
-def _rot_from_rotvec(v: np.ndarray) -> np.ndarray:
-    a = float(np.linalg.norm(v))
-    if a < 1e-300:
-        return np.eye(3)
-    k = v / a
-    K = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
-    return np.eye(3) + math.sin(a) * K + (1 - math.cos(a)) * (K @ K)
-
-
-def _mat_to_quat(R: np.ndarray) -> np.ndarray:
-    q = np.zeros(4)
-    mujoco.mju_mat2Quat(q, np.ascontiguousarray(R).ravel())
-    return q
-
-
-class _Singular:
-    """Eq. 12 (docs/paper-reading.md): the base carries the arm near a singular arm Jacobian.
-
-    As :class:`uvms_mj.controllers.builtin.SingularHandler`, on the manipulability and in any
-    number of base position axes; the velocity the base takes at k1 is the trajectory's cruise
-    velocity when it has one, else its desired tip velocity at k1 (``v_event(k)``)."""
-
-    def __init__(self, js_low: float, js_high: float, n: int, v_event: Callable[[int], np.ndarray], size: int):
-        self.js_low, self.js_high, self.n, self.v_event = js_low, js_high, n, v_event
-        self.phase, self.k_event = 0, 0
-        self.v_from = np.zeros(size)
-        self.v_to = np.zeros(size)
-        self.v = np.zeros(size)
-
-    def update(self, k: int, manip: float) -> np.ndarray:
-        a = abs(manip)
-        if self.phase != 1 and a < self.js_low:
-            self.phase, self.k_event, self.v_from, self.v_to = 1, k, self.v.copy(), np.asarray(self.v_event(k), float)
-        elif self.phase == 1 and a > self.js_high:
-            self.phase, self.k_event, self.v_from, self.v_to = 2, k, self.v.copy(), np.zeros_like(self.v)
-        frac = min(1.0, (k - self.k_event + 1) / self.n)
-        self.v = self.v_from + frac * (self.v_to - self.v_from)
-        if self.phase == 2 and frac >= 1.0:
-            self.phase = 0
-        return self.v
 
 
 def small_inv(A: np.ndarray) -> np.ndarray:
@@ -297,30 +255,16 @@ class RAC(Controller):
         self.nbt = 6 if self.free else nb  # base rows of the task
         self.gamma = _gains("gamma", gamma, default)
         self.lam = _gains("lambda", lam, default)
-        self.js = check_positive("js", js)
-        self.js_high = self.js if js_high is None else check_positive("js_high", js_high)
-        if self.js_high < self.js:
-            raise ControllerError(f"js_high = {js_high!r} must be >= js = {js!r}")
-        if int(n_ramp) != n_ramp or n_ramp < 1:
-            raise ControllerError(f"n_ramp = {n_ramp!r} must be an integer >= 1")
-        self.n_ramp = int(n_ramp)
+        check_rac_settings(self, js, js_high, n_ramp, dls_threshold, dls_damping, tf, observer_gain, observer_input)
         size = 7 if self.free else nb
         self.base_reference = None if base_reference is None else np.asarray(base_reference, dtype=float)
         if self.base_reference is not None and (self.base_reference.shape != (size,)
                                                 or not np.all(np.isfinite(self.base_reference))):
             raise ControllerError(f"base_reference = {base_reference!r} must be {size} finite numbers")
-        self.dls_threshold = check_positive("dls_threshold", dls_threshold)
-        self.dls_damping = check_positive("dls_damping", dls_damping)
         self.null_kp = float(null_kp)
         self.null_kd = float(null_kd)
         if not (math.isfinite(self.null_kp) and self.null_kp >= 0 and math.isfinite(self.null_kd) and self.null_kd >= 0):
             raise ControllerError(f"null_kp = {null_kp!r}, null_kd = {null_kd!r} must be finite and >= 0")
-        self.tf = check_positive("tf", tf)
-        if observer_gain not in ("1/Tf", "(1-h)/T"):
-            raise ControllerError(f"observer_gain = {observer_gain!r}; allowed: 1/Tf, (1-h)/T")
-        if observer_input not in ("allocated", "commanded"):
-            raise ControllerError(f"observer_input = {observer_input!r}; allowed: allocated, commanded")
-        self.observer_input = observer_input
         self.filter = LowPassZOH(self.T, self.tf, size=nb)
         self.g = 1.0 / self.tf if observer_gain == "1/Tf" else (1.0 - self.filter.h) / self.T
         # Our extension (off by default, not in the paper): the same observer on the arm's rows.
@@ -391,7 +335,6 @@ class RAC(Controller):
         return out
 
     def _jacobian(self, jac: dict) -> np.ndarray:
-        nv = self.robot.model.nv
         if self.free:
             rows = [jac["base_p"], jac["base_r"], jac["tip_p"]] + ([jac["tip_r"]] if self.tip_orientation else [])
             return np.vstack(rows)
@@ -463,8 +406,8 @@ class RAC(Controller):
         pos = {int(d): i for i, d in enumerate(a)}
         self._motor_idx = np.array([pos[int(d)] for d in r.motor_dofs], dtype=int)
         self._Jb_key = None
-        self.singular = _Singular(self.js, self.js_high, self.n_ramp, self._v_event,
-                                  3 if self.free else self.lin.size)
+        self.singular = SingularHandler(self.js, self.js_high, self.n_ramp, self._v_event,
+                                        size=3 if self.free else self.lin.size)
         self._base_offset = {m.k: np.zeros(3 if self.free else self.lin.size)}
         self._k0 = m.k
         self._pd_prev = self._desired(m.k)
@@ -583,7 +526,7 @@ class RAC(Controller):
         if f_m_hat is not None:
             signals["f_M_hat"] = f_m_hat
         if self.free:
-            signals["base_desired"] = np.concatenate((p_d[0][:3], _mat_to_quat(p_d[1][0])))
+            signals["base_desired"] = np.concatenate((p_d[0][:3], mat_to_quat(p_d[1][0])))
             signals["tip_desired"] = p_d[0][3:6].copy()
             signals["tip_measured"] = p[0][3:6].copy()
         else:

@@ -30,11 +30,12 @@ clamped (anti-windup) to ``integral_limit`` times the largest thrust / torque ea
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
 from ..nominal_robot import JointTrajectory, NominalRobot
+from ..rotations import quat_to_mat, rotation_log
 from ..thrusters import Allocator
 from .base import Command, Controller, ControllerError, Measurement, check_positive, register
 
@@ -43,30 +44,12 @@ from .base import Command, Controller, ControllerError, Measurement, check_posit
 DEFAULT_T = 0.02
 
 
-def quat_to_mat(q: Sequence[float]) -> np.ndarray:
-    """Rotation matrix of a quaternion (w, x, y, z) (normalised here)."""
-    w, x, y, z = np.asarray(q, dtype=float) / np.linalg.norm(q)
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
-
-
-def rotation_log(R: np.ndarray) -> np.ndarray:
-    """Rotation vector (axis times angle [rad], angle in [0, pi]) of a rotation matrix."""
-    (r00, r01, r02), (r10, r11, r12), (r20, r21, r22) = np.asarray(R, dtype=float).tolist()
-    c = max(-1.0, min(1.0, 0.5 * (r00 + r11 + r22 - 1.0)))
-    a = math.acos(c)
-    wx, wy, wz = r21 - r12, r02 - r20, r10 - r01
-    if a < 1e-6:
-        return np.array([0.5 * wx, 0.5 * wy, 0.5 * wz])
-    if math.pi - a < 1e-6:  # near pi: axis from the symmetric part
-        B = 0.5 * (np.asarray(R, dtype=float) + np.eye(3))
-        axis = np.sqrt(np.clip(np.diag(B), 0.0, None))
-        i = int(np.argmax(axis))
-        axis = B[i] / max(axis[i], 1e-12)
-        return a * axis / np.linalg.norm(axis)
-    k = a / (2.0 * math.sin(a))
-    return np.array([k * wx, k * wy, k * wz])
+def station_reference(q: np.ndarray, layout) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The station to hold from the first measurement ``q`` (qpos): vehicle position (world
+    [m]), unit quaternion (w, x, y, z), its rotation matrix, and the arm joint angles [rad]."""
+    a = layout.base_qadr
+    quat = q[a + 3:a + 7] / np.linalg.norm(q[a + 3:a + 7])
+    return q[a:a + 3].copy(), quat, quat_to_mat(quat), q[layout.joint_qadr].copy()
 
 
 def _gains(name: str, value: Any, size: int) -> np.ndarray | None:
@@ -158,11 +141,7 @@ class StationPID(Controller):
     def reset(self, measurement: Measurement) -> None:
         r, lay = self.robot, self.robot.layout
         q = np.asarray(measurement.q, dtype=float)
-        a = lay.base_qadr
-        self.p_ref = q[a:a + 3].copy()
-        self.quat_ref = q[a + 3:a + 7] / np.linalg.norm(q[a + 3:a + 7])
-        self.R_ref = quat_to_mat(self.quat_ref)
-        self.q_joint0 = q[lay.joint_qadr].copy()
+        self.p_ref, self.quat_ref, self.R_ref, self.q_joint0 = station_reference(q, lay)
         M = r.mass_matrix(q)
         d = lay.base_dadr
         mb = np.diag(M)[d:d + 6]

@@ -103,7 +103,8 @@ import numpy as np
 from ..nominal_robot import JointTrajectory, NominalRobot
 from ..thrusters import Allocator
 from .base import Command, Controller, ControllerError, Measurement, check_positive, register
-from .station_pid import DEFAULT_T, quat_to_mat, rotation_log
+from ..rotations import quat_to_mat, rotation_log
+from .station_pid import DEFAULT_T, station_reference
 
 #: The priority forms (module docstring).
 PRIORITY_FORMS = ("siciliano_slotine", "singularity_robust")
@@ -371,11 +372,7 @@ class TaskPriority(Controller):
     def reset(self, measurement: Measurement) -> None:
         r, lay, d = self.robot, self.robot.layout, self.d
         q = np.asarray(measurement.q, dtype=float).copy()
-        a = lay.base_qadr
-        self.p_ref = q[a:a + 3].copy()
-        self.quat_ref = q[a + 3:a + 7] / np.linalg.norm(q[a + 3:a + 7])
-        self.R_ref = quat_to_mat(self.quat_ref)
-        self.q_joint0 = q[lay.joint_qadr].copy()
+        self.p_ref, self.quat_ref, self.R_ref, self.q_joint0 = station_reference(q, lay)
         M = r.mass_matrix(q)
         self.tip0 = r.jacobians()["tip"].copy()
         m = np.diag(M)
