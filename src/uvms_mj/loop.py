@@ -154,7 +154,7 @@ def run_closed_loop(
     sub = int(round(sub))
     n = int(math.floor(duration / T + 1e-9)) + 1
     rng = np.random.default_rng(seed)
-    rec: dict[str, list] = {}
+    rows: list[dict] = []
     times: list[float] = []
     status, reason = "ok", ""
     q_prev_meas = None
@@ -199,31 +199,32 @@ def run_closed_loop(
         if k == 0:
             controller.reset(meas)
         cmd: Command = controller.compute(meas)
-        out = np.abs(np.concatenate((np.ravel(cmd.thrust), np.ravel(cmd.torques))).astype(float))
-        big = float(out.max()) if out.size else 0.0
-        if not math.isfinite(float(out.sum())):
-            status, reason = "diverged", f"controller output not finite at t = {k * T:.4f} s"
-            break
+        thrust = np.asarray(cmd.thrust, dtype=float)
+        torques = np.asarray(cmd.torques, dtype=float)
+        out = thrust.ravel().tolist() + torques.ravel().tolist()
+        if not math.isfinite(sum(out)):  # also true of a sum beyond the float range: look closer
+            if not all(math.isfinite(v) for v in out):
+                status, reason = "diverged", f"controller output not finite at t = {k * T:.4f} s"
+                break
+        big = max(map(abs, out)) if out else 0.0
         if big > COMMAND_ABS_MAX:
             status, reason = "diverged", (f"controller command {big:.3g} (N or N m) beyond {COMMAND_ABS_MAX:g} "
                                           f"at t = {k * T:.4f} s")
             break
-        plant.set_thrust(cmd.thrust)
-        plant.set_joint_torques(cmd.torques)
+        plant.set_thrust(thrust)
+        plant.set_joint_torques(torques)
         if k == 0 and warm_start:
             if layout is not None:
-                plant.warm_start(cmd.thrust)
+                plant.warm_start(thrust)
             else:
-                plant.data.act[plant._thr_act] = np.clip(cmd.thrust, plant._thr_lo, plant._thr_hi)
+                plant.data.act[plant._thr_act] = np.clip(thrust, plant._thr_lo, plant._thr_hi)
         times.append(k * T)
         row = dict(cmd.signals)
         row.update(
             q_true=plant.q, qd_true=plant.qd, tip_true=plant.tip_position, q_measured=meas.q,
-            thrust_command=np.asarray(cmd.thrust, dtype=float), thrust_force=plant.thruster_forces,
-            torques=np.asarray(cmd.torques, dtype=float),
+            thrust_command=thrust, thrust_force=plant.thruster_forces, torques=torques,
         )
-        for key, val in row.items():
-            rec.setdefault(key, []).append(val)
+        rows.append(row)
         if sink is not None:
             sink(k * T, row)
         if on_sample is not None:
@@ -235,7 +236,11 @@ def run_closed_loop(
         except DivergenceError as exc:
             status, reason = "diverged", str(exc)
             break
-    signals = {key: np.asarray(v) for key, v in rec.items()}
+    keys = dict.fromkeys(key for row in rows[:1] for key in row)  # first-appearance order
+    for row in rows[1:]:
+        if len(row) != len(keys) or not keys.keys() >= row.keys():
+            keys.update(dict.fromkeys(row))
+    signals = {key: np.asarray([row[key] for row in rows if key in row]) for key in keys}
     meta = {"T": T, "dt": dt, "seed": seed, "controller": controller_name(controller)}
     warned = mujoco_warnings(clear=True)
     if warned:

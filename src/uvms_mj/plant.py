@@ -49,6 +49,14 @@ from .physics import model as _pm
 from .physics import python_backend as _pyb
 from .physics import reference as _ref
 
+def _finite(x: np.ndarray) -> bool:
+    """Every entry of a small float array finite (cheaper than numpy's all(isfinite) here)."""
+    return all(map(math.isfinite, x.ravel().tolist()))
+
+
+#: What :meth:`Plant.step` saves before a batch of steps (restored for an exact replay).
+_SNAPSHOT = mujoco.mjtState.mjSTATE_INTEGRATION
+
 _PKG = Path(__file__).resolve().parent
 
 def models_dir() -> Path:
@@ -216,6 +224,8 @@ class Plant:
         uvms_mj.physics.build.PluginUnavailableError: backend "native" requested but the
             plugins cannot be built (e.g. no C compiler); the message says why.
     """
+
+    _snapshot: np.ndarray | None = None  # Plant.step's saved state (per instance once used)
 
     def __init__(
         self,
@@ -424,7 +434,7 @@ class Plant:
         """Actual thrust of each thruster along its axis [N] at the current time: the lag state,
         clamped to the force range (``data.actuator_force`` holds the value at the start of the
         last step)."""
-        return np.clip(self.data.act[self._thr_act], self._thr_lo, self._thr_hi)
+        return np.minimum(np.maximum(self.data.act[self._thr_act], self._thr_lo), self._thr_hi)
 
     @property
     def thruster_commands(self) -> np.ndarray:
@@ -440,7 +450,7 @@ class Plant:
         With ``dead_zone`` on, commands inside the dead zone give no thrust.
         """
         c = np.asarray(commands, dtype=float)
-        if c.shape != (3,) or not np.all(np.isfinite(c)):
+        if c.shape != (3,) or not _finite(c):
             raise ValueError(f"thruster commands {commands!r} must be 3 finite numbers [N]")
         if self.dead_zone:
             lo, hi = self.params.dead_zone
@@ -450,7 +460,7 @@ class Plant:
     def set_joint_torques(self, torques: Sequence[float]) -> None:
         """Command the two joint torques [N m], held until changed."""
         t = np.asarray(torques, dtype=float)
-        if t.shape != (2,) or not np.all(np.isfinite(t)):
+        if t.shape != (2,) or not _finite(t):
             raise ValueError(f"joint torques {torques!r} must be 2 finite numbers [N m]")
         self.data.ctrl[self._mot] = t
 
@@ -459,6 +469,11 @@ class Plant:
     def step(self, n: int = 1) -> None:
         """Advance n physics steps.
 
+        Native backend: the n steps run in one ``mj_step(m, d, nstep=n)`` from a saved state;
+        if the batch shows a problem (a MuJoCo reset warning, a non-finite or runaway state), the
+        state is restored and the steps are replayed one by one, so the divergence is reported at
+        the step where it happened, exactly as without the batch.
+
         Raises:
             DivergenceError: the state became non-finite or exceeded ``max_speed``; the message
                 says at what time. The plant must be reset before stepping again.
@@ -466,9 +481,29 @@ class Plant:
         m, d = self.model, self.data
         self._check()
         self._check_state()
+        served = self._serving.get(d._address)
+        if served is None and n > 1:
+            snap = self._snapshot
+            if snap is None:
+                snap = self._snapshot = np.empty(mujoco.mj_stateSize(m, _SNAPSHOT))
+            mujoco.mj_getState(m, d, snap, _SNAPSHOT)
+            t_end = d.time + n * m.opt.timestep
+            mujoco.mj_step(m, d, nstep=n)
+            # a MuJoCo reset (bad qpos/qvel/qacc) restarts time: the clock tells it
+            if abs(d.time - t_end) < 0.5 * m.opt.timestep:
+                self._check_state()
+                if self._diverged is None:
+                    return
+                self._diverged = None
+            mujoco.mj_setState(m, d, snap, _SNAPSHOT)  # replay step by step: the exact report
+        self._step_each(n, served)
+        self._check_state()
+        self._check()
+
+    def _step_each(self, n: int, served) -> None:
+        m, d = self.model, self.data
         step = mujoco.mj_step
         t = d.time
-        served = self._serving.get(d._address)
         if served is None:
             for _ in range(n):
                 step(m, d)
@@ -488,16 +523,14 @@ class Plant:
         for w in (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQVEL, mujoco.mjtWarning.mjWARN_BADQPOS):
             if d.warning[w].number > 0 and self._diverged is None:
                 self._diverged = (float(t), f"non-finite or huge state ({w.name}; MuJoCo reset the state)")
-        self._check_state()
-        self._check()
 
     def _check_state(self) -> None:
         """Record a divergence of the current state (non-finite, or sum |q_dot| > max_speed)."""
         if self._diverged is not None:
             return
         d = self.data
-        speed = float(np.abs(d.qvel).sum())
-        if not (speed <= self.max_speed and math.isfinite(float(d.qpos.sum()))):
+        speed = sum(map(abs, d.qvel.tolist()))  # plain floats: cheaper than numpy at these sizes
+        if not (speed <= self.max_speed and math.isfinite(sum(d.qpos.tolist()))):
             finite = bool(np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel)))
             what = "non-finite state (NaN or inf)" if not finite else (
                 f"runaway: sum |q_dot| = {speed:.3g} > max_speed = {self.max_speed:g}")

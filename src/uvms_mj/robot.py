@@ -38,7 +38,7 @@ from .hydro import HydroTerms
 from .params import ParameterError
 from .physics import model as _pm
 from .rotations import quat_from_rpy, rpy_from_quat  # noqa: F401  (part of this module's API)
-from .plant import Plant, _resolve_backend, install_mujoco_warning_handler, models_dir, set_integration, water_terms
+from .plant import Plant, _finite, _resolve_backend, install_mujoco_warning_handler, models_dir, set_integration, water_terms
 from .thrusters import CurveInverse, thruster_actuators, thruster_curves
 
 __all__ = [
@@ -691,7 +691,7 @@ class RobotPlant(Plant):
         """Command each thruster's thrust [N] (in :attr:`Layout.thruster_names` order)."""
         c = np.asarray(commands, dtype=float).ravel()
         n = len(self._thr)
-        if c.shape != (n,) or not np.all(np.isfinite(c)):
+        if c.shape != (n,) or not _finite(c):
             raise ValueError(f"thruster commands {list(np.ravel(commands))!r} must be {n} finite numbers [N]")
         if n:
             self.data.ctrl[self._thr] = self.thrust_to_ctrl(c)
@@ -700,7 +700,7 @@ class RobotPlant(Plant):
         """Command the joint actuators (:attr:`Layout.motor_names` order) [N m]."""
         t = np.asarray(torques, dtype=float).ravel()
         n = len(self._mot)
-        if t.shape != (n,) or not np.all(np.isfinite(t)):
+        if t.shape != (n,) or not _finite(t):
             raise ValueError(f"joint torques {list(np.ravel(torques))!r} must be {n} finite numbers [N m]")
         if n:
             self.data.ctrl[self._mot] = t

@@ -181,6 +181,10 @@ class RAC(Controller):
 
     observer = False
     robots = "floating"
+    #: Run the samples through the compiled kernel when it is available (:mod:`.kernel`; the
+    #: numbers are the Python code's to round-off). False: always the Python code below.
+    use_kernel = True
+    _ws = None
     #: The defaults the paper's robot gets for the parameters whose default depends on the robot
     #: (what a resolved paper scenario shows).
     PAPER_DEFAULTS = {"gamma": [0.3, 0.3, 0.2, 0.2, 0.2], "lam": [0.3, 0.3, 0.2, 0.2, 0.2]}
@@ -419,6 +423,119 @@ class RAC(Controller):
         b = self.base_dofs
         self.filter.reset(self.g * M[np.ix_(b, b)] @ qd0[b])  # f_E_hat(0) = 0
         self.filter_arm.reset(self.g_arm * M[np.ix_(a, a)] @ qd0[a])
+        self._ws = self._kernel_workspace() if self.use_kernel else None
+
+    # ---------------------------------------------------------------- compiled samples
+
+    def _kernel_workspace(self):
+        """The compiled kernel's workspace for this run, loaded with the state that
+        :meth:`reset` set, or None where the Python code runs (no kernel, the Python hydrodynamics
+        backend, a planar base whose Jacobian is not constant, a robot beyond the kernel's sizes)."""
+        from . import kernel as _k
+
+        r = self.robot
+        lib = _k.library()
+        if lib is None or getattr(r, "_served", None) is not None or (not self.free and self._Jb_const is None):
+            return None
+        m, lay = r.model, r.layout
+        nb, na = self.base_dofs.size, self.arm_dofs.size
+        ntr = self.ntask - self.nbt
+        nvec = 6 if self.free else self.ntask
+        sizes = {"nq": m.nq, "nv": m.nv, "nb": nb, "na": na, "ntask": self.ntask, "nbt": self.nbt, "ntr": ntr,
+                 "nvec": nvec, "free_base": int(self.free), "tip_orient": int(self.tip_orientation),
+                 "square": int(ntr == na), "observer": int(self.observer), "observer_arm": int(self.observer_arm),
+                 "clip_alloc": int(self.allocator is None), "alloc_input": int(self.observer_input == "allocated"),
+                 "nthr": self.B.shape[1], "nwr": self.wrench_rows.size, "nmot": self._motor_idx.size,
+                 "base_body": lay.base_body, "tip_site": lay.tip_site, "base_qadr": lay.base_qadr if self.free else 0,
+                 "wls_fast": 0}
+        if max(m.nv, self.ntask, na, nb) > _k.MAXN:
+            return None
+        params = {"T": self.T, "dls_threshold": self.dls_threshold, "dls_damping": self.dls_damping,
+                  "null_kp": self.null_kp, "null_kd": self.null_kd, "g": self.g, "h": self.filter.h,
+                  "g_arm": self.g_arm, "h_arm": self.filter_arm.h}
+        index = {"base_dofs": self.base_dofs, "arm_dofs": self.arm_dofs, "tip_rows": self.tip_rows,
+                 "base_qpos": getattr(self, "base_qpos", ()), "arm_qadr": self.arm_qadr,
+                 "wrench_rows": self.wrench_rows, "motor_idx": self._motor_idx}
+        const = {"gamma": self.gamma, "lam": self.lam, "q_rest": self.q_rest, "B": self.B, "B_pinv": self.B_pinv,
+                 "lo": self.lo, "hi": self.hi, "motor_lo": r.motor_lo, "motor_hi": r.motor_hi}
+        if not self.free:
+            const.update(Jb=self._Jb_const, Jb_pinvT=self._Jb_pinvT)
+        al = self.allocator
+        if al is not None and not al._any_equal:  # the Allocator's fast path: u = P_free S tau
+            sizes["wls_fast"] = 1
+            const["Q"] = al._P_free @ al.S
+        ws = _k.Workspace(lib, sizes, params, index, const)
+        a = ws.a
+        a["q_prev"][:] = self._q_prev
+        a["p_prev"][:] = self._p_prev[0]
+        a["R_prev"][:] = self._rots(self._p_prev[1])
+        a["J_prev"][:] = self._J_prev
+        a["pd_prev"][:] = self._pd_prev[0]
+        a["Rd_prev"][:] = self._rots(self._pd_prev[1])
+        a["z"][:] = self.filter.z
+        a["z_arm"][:] = self.filter_arm.z
+        self.filter.z, self.filter_arm.z = a["z"], a["z_arm"]  # the filters' states now live in the kernel
+        self._m_ptr, self._d_ptr = r.model._address, r.data._address
+        return ws
+
+    @staticmethod
+    def _rots(rots: list) -> np.ndarray:
+        """Up to two rotation matrices as the kernel's 18 numbers (zeros for the missing)."""
+        out = np.zeros(18)
+        for i, R in enumerate(rots):
+            out[9 * i:9 * i + 9] = R.ravel()
+        return out
+
+    def _compute_kernel(self, m: Measurement) -> Command:
+        """One sample through the compiled kernel: the steps of :meth:`compute`'s Python code
+        (see rac_kernel.c), Eq. 12, the desired points and a "wls" allocation staying here."""
+        ws, T, k = self._ws, self.T, m.k
+        a = ws.a
+        first = k <= self._k0
+        a["q"][:] = m.q
+        has_qd = m.qd is not None
+        if has_qd:
+            a["qd_meas"][:] = m.qd
+        ws.measure(ws.ptr, self._m_ptr, self._d_ptr, first, has_qd)
+        sc = a["scalars"]
+        manip = float(sc[0])
+        v_base = self.singular.update(k, manip)  # Eq. 12
+        self._base_offset[k + 1] = self._base_offset[k] + T * v_base
+        cached = self._pd_next
+        p_d = cached[1] if cached is not None and cached[0] == k else self._desired(k)
+        p_d_next = self._desired(k + 1)
+        self._pd_next = (k + 1, p_d_next)
+        a["pd"][:] = p_d[0]
+        a["pdn"][:] = p_d_next[0]
+        if self.free:
+            a["Rd"][:9] = p_d[1][0].ravel()
+            a["Rdn"][:9] = p_d_next[1][0].ravel()
+            if self.tip_orientation:
+                a["Rd"][9:] = p_d[1][1].ravel()
+                a["Rdn"][9:] = p_d_next[1][1].ravel()
+        rc = ws.command(ws.ptr, first)
+        if rc < 0:
+            raise np.linalg.LinAlgError("Singular matrix")
+        if rc == 1:  # "wls": the Allocator
+            res = self.allocator(a["body"][self.wrench_rows])
+            a["thrust"][:] = res.thrust
+            saturated = np.asarray(res.saturated, dtype=bool)
+        else:
+            saturated = a["sat"] != 0.0
+        ws.finish(ws.ptr)
+        signals = {"e_p": a["e_p"].copy(), "e_v": a["e_v"].copy(), "v_desired": a["v_d"].copy(),
+                   "a_desired": a["a_d"].copy(), "qdd_desired": a["qdd"].copy(), "u_B": a["u_B"].copy(),
+                   "u_B_applied": a["u_app"].copy(), "f_E_hat": a["f_e_hat"].copy(), "manipulability": manip,
+                   "singular_phase": self.singular.phase, "dls_active": bool(sc[2]), "thrust_saturated": saturated}
+        if self.observer_arm:
+            signals["f_M_hat"] = a["f_m_hat"].copy()
+        if self.free:
+            signals["base_desired"] = np.concatenate((p_d[0][:3], a["base_quat"]))
+            signals["tip_desired"] = p_d[0][3:6].copy()
+            signals["tip_measured"] = a["p"][3:6].copy()
+        else:
+            signals = {"p_desired": p_d[0], "p_measured": a["p"].copy(), **signals, "det_B": float(sc[1])}
+        return Command(thrust=a["thrust"].copy(), torques=a["torques"].copy(), signals=signals)
 
     def _velocity(self, q: np.ndarray) -> np.ndarray:
         """Backward difference of the measured coordinates as qvel (quaternions included)."""
@@ -427,6 +544,8 @@ class RAC(Controller):
         return qd
 
     def compute(self, m: Measurement) -> Command:
+        if self._ws is not None:
+            return self._compute_kernel(m)
         T, k, r = self.T, m.k, self.robot
         q = np.asarray(m.q, dtype=float)
         first = k <= self._k0
