@@ -82,19 +82,21 @@ class SingularHandler:
         self.v_from = np.zeros(size)
         self.v_to = np.zeros(size)
         self.v = np.zeros(size)
+        self._settled = False  # the current ramp has reached its end (v no longer changes)
 
     def update(self, k: int, detb: float) -> np.ndarray:
         """Base desired linear velocity (world, m/s) for the interval [k, k+1)."""
         a = abs(detb)
-        if self.phase == 0 and not a < self.js_low and k - self.k_event + 1 >= self.n:
-            return self.v  # normal, ramp done: v = v_from + (0 - v_from) = 0 exactly, as below
         if self.phase != 1 and a < self.js_low:  # k1 (again, if it re-enters during release)
             v = self.v_cruise(k) if callable(self.v_cruise) else self.v_cruise
             self.phase, self.k_event, self.v_from, self.v_to = 1, k, self.v.copy(), np.array(v, dtype=float)
         elif self.phase == 1 and a > self.js_high:  # k2
             self.phase, self.k_event, self.v_from, self.v_to = 2, k, self.v.copy(), np.zeros_like(self.v)
+        elif self._settled:  # no event and the ramp is over: v as computed at its end
+            return self.v
         frac = min(1.0, (k - self.k_event + 1) / self.n)
         self.v = self.v_from + frac * (self.v_to - self.v_from)
+        self._settled = frac >= 1.0
         if self.phase == 2 and frac >= 1.0:
             self.phase = 0
         return self.v

@@ -355,9 +355,12 @@ class RAC(Controller):
             vec = np.concatenate((self._ref_pos + off, tip))
             rots = [self._ref_R] + ([self._tip_R_d(t)] if self.tip_orientation else [])
             return vec, rots
-        base = self._ref_pos.copy()
-        base[self.lin] += off
-        return np.concatenate((base, tip)), []
+        vec = np.empty(self.ntask)
+        nb = self._ref_pos.size
+        vec[:nb] = self._ref_pos
+        vec[self.lin] += off
+        vec[nb:] = tip
+        return vec, []
 
     def _tip_d(self, t: float) -> np.ndarray:
         if self.trajectory is None:
@@ -500,7 +503,8 @@ class RAC(Controller):
         sc = a["scalars"]
         manip = float(sc[0])
         v_base = self.singular.update(k, manip)  # Eq. 12
-        self._base_offset[k + 1] = self._base_offset[k] + T * v_base
+        off = self._base_offset[k]
+        self._base_offset[k + 1] = off + T * v_base if any(v_base.tolist()) else off  # off + 0 = off
         cached = self._pd_next
         p_d = cached[1] if cached is not None and cached[0] == k else self._desired(k)
         p_d_next = self._desired(k + 1)
@@ -523,19 +527,20 @@ class RAC(Controller):
         else:
             saturated = a["sat"] != 0.0
         ws.finish(ws.ptr)
-        signals = {"e_p": a["e_p"].copy(), "e_v": a["e_v"].copy(), "v_desired": a["v_d"].copy(),
-                   "a_desired": a["a_d"].copy(), "qdd_desired": a["qdd"].copy(), "u_B": a["u_B"].copy(),
-                   "u_B_applied": a["u_app"].copy(), "f_E_hat": a["f_e_hat"].copy(), "manipulability": manip,
-                   "singular_phase": self.singular.phase, "dls_active": bool(sc[2]), "thrust_saturated": saturated}
+        b, sl = ws.block.copy(), ws.slices  # this sample's results (the kernel's buffers are reused)
+        signals = {"e_p": b[sl["e_p"]], "e_v": b[sl["e_v"]], "v_desired": b[sl["v_d"]], "a_desired": b[sl["a_d"]],
+                   "qdd_desired": b[sl["qdd"]], "u_B": b[sl["u_B"]], "u_B_applied": b[sl["u_app"]],
+                   "f_E_hat": b[sl["f_e_hat"]], "manipulability": manip, "singular_phase": self.singular.phase,
+                   "dls_active": bool(sc[2]), "thrust_saturated": saturated}
         if self.observer_arm:
-            signals["f_M_hat"] = a["f_m_hat"].copy()
+            signals["f_M_hat"] = b[sl["f_m_hat"]]
         if self.free:
-            signals["base_desired"] = np.concatenate((p_d[0][:3], a["base_quat"]))
+            signals["base_desired"] = np.concatenate((p_d[0][:3], b[sl["base_quat"]]))
             signals["tip_desired"] = p_d[0][3:6].copy()
-            signals["tip_measured"] = a["p"][3:6].copy()
+            signals["tip_measured"] = b[sl["p"]][3:6]
         else:
-            signals = {"p_desired": p_d[0], "p_measured": a["p"].copy(), **signals, "det_B": float(sc[1])}
-        return Command(thrust=a["thrust"].copy(), torques=a["torques"].copy(), signals=signals)
+            signals = {"p_desired": p_d[0], "p_measured": b[sl["p"]], **signals, "det_B": float(sc[1])}
+        return Command(thrust=b[sl["thrust"]], torques=b[sl["torques"]], signals=signals)
 
     def _velocity(self, q: np.ndarray) -> np.ndarray:
         """Backward difference of the measured coordinates as qvel (quaternions included)."""

@@ -40,6 +40,12 @@ _ARRAY_FIELDS = ("q", "qd_meas", "pd", "Rd", "pdn", "Rdn",
                  "body", "thrust", "sat", "torques", "base_quat")
 
 
+#: The results :meth:`uvms_mj.controllers.rac.RAC.compute` returns as signals or commands
+#: (:attr:`Workspace.block`).
+OUTPUTS = ("p", "e_p", "e_v", "v_d", "a_d", "qdd", "u_B", "u_app", "f_e_hat", "f_m_hat", "thrust", "sat",
+           "torques", "base_quat")
+
+
 class _Struct(ctypes.Structure):
     """``uvms_rac`` of rac_kernel.c (same fields, same order)."""
 
@@ -121,7 +127,16 @@ class Workspace:
                   "u_app": nb, "f_e_hat": nb, "f_m_hat": na, "f_t": nb, "f_tM": na, "u_M": na, "body": 6,
                   "thrust": nthr, "sat": nthr, "torques": nmot, "base_quat": 4}
         self.lib = lib
-        self.a: dict[str, np.ndarray] = {k: np.zeros(v) for k, v in shapes.items()}
+        self.a: dict[str, np.ndarray] = {k: np.zeros(v) for k, v in shapes.items() if k not in OUTPUTS}
+        # the per-sample results that become signals: views of one block, copied once per sample
+        sizes_out = [int(np.prod(shapes[k])) for k in OUTPUTS]
+        self.block = np.zeros(max(sum(sizes_out), 1))
+        self.slices: dict[str, slice] = {}
+        o = 0
+        for k, n in zip(OUTPUTS, sizes_out):
+            self.slices[k] = slice(o, o + n)
+            self.a[k] = self.block[o:o + n]
+            o += n
         self._keep = []
         s = _Struct()
         for k in _INT_FIELDS:
@@ -141,7 +156,6 @@ class Workspace:
         for k in _ARRAY_FIELDS:
             arr = self.a[k]
             if arr.size == 0:
-                arr = self.a[k] = np.zeros(0)
                 self._keep.append(np.zeros(1))
                 setattr(s, k, self._keep[-1].ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
             else:
