@@ -67,8 +67,11 @@ def one_run(log: bool, split: bool = False, scenario: Path = SCENARIO) -> dict:
         t0 = time.perf_counter()
         res = run_closed_loop(plant, ctrl, sc.duration, T=T, sensor=sensor_model(sc), seed=sc.seed,
                               warm_start=sc.warm_start, sink=sink)
-        if rec is not None:
-            rec.close(res.status, res.reason)
+        if rec is not None:  # close encodes and writes the samples since the last flush: logging too
+            close = Timer(rec.close)
+            close(res.status, res.reason)
+            if split:
+                timers["logging"].total += close.total
         wall = time.perf_counter() - t0
     steps = round(sc.duration / plant.model.opt.timestep)
     return {"wall": wall, "steps": steps, "sim": sc.duration, "timers": {k: v.total for k, v in timers.items()},

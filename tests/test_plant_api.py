@@ -108,6 +108,31 @@ def test_divergence_is_reported_with_its_time(backend):
     plant.step(1)
 
 
+def test_batched_steps_are_single_steps_and_report_a_divergence_where_it_happened():
+    """Plant.step(n) runs n steps at once (mj_step nstep) from a saved state: the same state as n
+    single steps, bit for bit; a runaway inside the batch (full thrust, max_speed 1) is
+    replayed step by step and reported at the step where it happened, as with single steps."""
+    a, b = Plant(), Plant()
+    for p in (a, b):
+        p.set_thrust([5.0, -3.0, 2.0])
+    a.step(40)
+    for _ in range(40):
+        b.step(1)
+    assert np.array_equal(a.data.qpos, b.data.qpos) and np.array_equal(a.data.qvel, b.data.qvel)
+    assert a.time == b.time
+    msgs = []
+    for batch in (60, 1):
+        p = Plant(max_speed=1.0)
+        p.set_thrust([30.0, 30.0, 30.0])
+        with pytest.raises(DivergenceError) as info:
+            for _ in range(600 // batch):
+                p.step(batch)
+        msgs.append(str(info.value))
+    assert msgs[0] == msgs[1] and "runaway" in msgs[0]
+    t = float(msgs[0].split("t = ")[1].split(" s")[0])
+    assert 0.0 < t < 600 * Plant().model.opt.timestep and round(t / Plant().model.opt.timestep) % 60 != 0
+
+
 def run_alone(**kw) -> np.ndarray:
     p = Plant(**kw)
     p.set_state(base_velocity=(0.1, 0.0, 0.3))

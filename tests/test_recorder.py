@@ -563,7 +563,8 @@ def test_a_signal_during_a_write_waits_for_the_write(tmp_path, params):
     complete in the log."""
     path = tmp_path / "held.mcap"
     with pytest.raises(Terminated):
-        with handle_sigterm(), McapRecorder(path, params, {}) as rec:
+        # flush_interval 0: each sample is encoded and written by its own write_sample
+        with handle_sigterm(), McapRecorder(path, params, {}, flush_interval=0) as rec:
             rec.write_sample(0.0, synthetic_row(0))
             add_sample = rec._writer.add_sample
             calls = []
@@ -647,3 +648,131 @@ def test_legacy_joint_states_log_reads_back(recorded, tmp_path):
         assert np.array_equal(new.signals[k], legacy.signals[k], equal_nan=True), k
     chans = {c["topic"]: c["schema"] for c in log_info(old)["channels"]}
     assert chans["/joint_states"] == LEGACY_JOINT_STATES
+
+
+# ----------------------------------------------------------------------------- fast writing
+
+
+def _writer_bytes(cls, compression, batched=False, **kw):
+    """A file of 600 messages on 2 channels with flushes, chunks of ~2 KB."""
+    import io
+
+    buf = io.BytesIO()
+    w = cls(buf, chunk_size=2000, compression=compression, **kw)
+    w.start("", "test")
+    sid = w.register_schema("s", "jsonschema", b"{}")
+    c1, c2 = w.register_channel("/a", "json", sid), w.register_channel("/b", "json", sid)
+    for i in range(300):
+        msgs = [(c1 if i % 3 else c2, b'{"i":%d}' % i * (i % 5 + 1)), (c2, b"[%d]" % i)]
+        t = (i * 7919) % 1000 * 10  # not monotonic: the start/end times are min/max
+        if batched:
+            w.add_sample(msgs, t, i, t + 1)
+        else:
+            for cid, data in msgs:
+                w.add_message(cid, t, data, t + 1, i)
+        if i % 97 == 0:
+            w.flush()
+    w.finish()
+    return buf.getvalue()
+
+
+def _all_records(data: bytes):
+    import io
+
+    from mcap.stream_reader import StreamReader
+
+    return [r for r in StreamReader(io.BytesIO(data), skip_magic=False).records]
+
+
+@pytest.mark.parametrize("compression", ["NONE", "LZ4", "ZSTD"])
+def test_lean_writer_writes_what_mcaps_writer_writes(compression):
+    """The recorder's writer against mcap's own Writer on the same calls: byte for byte without
+    compression and with lz4; with zstd (level 1, one compressor) every record but the chunks'
+    compressed bytes and sizes is identical and the chunks decompress to the same bytes. One
+    add_sample is the same as its messages' add_message calls."""
+    from mcap.records import Chunk, ChunkIndex
+    from mcap.writer import CompressionType, Writer
+
+    from uvms_mj.recorder import _LeanWriter
+
+    comp = CompressionType[compression]
+    stock = _writer_bytes(Writer, comp)
+    lean = _writer_bytes(_LeanWriter, comp)
+    assert _writer_bytes(_LeanWriter, comp, batched=True) == lean
+    if compression != "ZSTD":
+        assert lean == stock
+        return
+    a, b = _all_records(stock), _all_records(lean)
+    assert [type(r) for r in a] == [type(r) for r in b]
+    import zstandard
+
+    for x, y in zip(a, b):
+        if isinstance(x, Chunk):
+            assert zstandard.ZstdDecompressor().decompress(y.data, max_output_size=x.uncompressed_size) == \
+                zstandard.decompress(x.data, max_output_size=x.uncompressed_size)
+            assert (x.uncompressed_crc, x.uncompressed_size, x.message_start_time, x.message_end_time) == \
+                (y.uncompressed_crc, y.uncompressed_size, y.message_start_time, y.message_end_time)
+        elif not isinstance(x, ChunkIndex) and type(x).__name__ not in ("Footer", "SummaryOffset", "DataEnd"):
+            assert x == y, type(x).__name__
+    # and mcap's indexed reader finds every message through the lean file's summary
+    got = [(c.topic, m.log_time, m.sequence, m.data) for _, c, m in make_reader(__import__("io").BytesIO(lean))
+           .iter_messages(log_time_order=False)]
+    want = [(c.topic, m.log_time, m.sequence, m.data) for _, c, m in make_reader(__import__("io").BytesIO(stock))
+            .iter_messages(log_time_order=False)]
+    assert got == want
+
+
+def _irregular_rows(n: int = 200) -> list:
+    """Rows with every kind the recorder takes (floats, ints, bools, bool and 2-D arrays, float32),
+    and, here and there, a non-finite number, a missing signal and a late one."""
+    rows = []
+    for k in range(n):
+        r = synthetic_row(k)
+        r["gain"] = np.array([[1.0, 2.0], [3.0, 0.1 * k]])
+        r["f32"] = np.array([0.1, 0.2 * k], dtype=np.float32)
+        r["count"] = np.int64(k)
+        if k % 37 == 5:
+            r["det_B"] = math.inf if k % 2 else math.nan
+        if k % 41 == 7:
+            r["q_true"] = np.array([0.0, np.nan, 0.1, -np.inf, 0.2])
+        if k % 53 == 11:
+            del r["singular_phase"]
+        if k == 150:
+            r["late"] = 1.0
+        rows.append((k / 60, r))
+    return rows
+
+
+def test_batched_encoding_is_the_per_sample_encoding(tmp_path, params):
+    """The recorder encodes the samples since its last flush at once; flushing after every sample
+    (batches of one) or once per 200 samples gives the same messages, for regular rows and for
+    every irregular one (non-finite numbers, missing and late signals)."""
+    logs = {}
+    for label, interval in (("each", 0.0), ("batch", 1e9)):
+        path = tmp_path / f"{label}.mcap"
+        with pytest.warns(UserWarning, match="first appeared after the first sample"):
+            with McapRecorder(path, params, {}, flush_interval=interval) as rec:
+                for t, r in _irregular_rows():
+                    rec.write_sample(t, r)
+                rec.close()
+        logs[label] = [(c.topic, m.log_time, m.sequence, m.data) for c, _, m in iter_messages(path)]
+    assert len(logs["each"]) > 700  # /scene, 4 per sample (3 with a non-finite pose), the paths
+    assert logs["each"] == logs["batch"]
+    back = read_log(tmp_path / "batch.mcap")
+    assert back.signals["det_B"][5] == math.inf and math.isnan(back.signals["det_B"][42])
+    assert np.isnan(back.signals["q_true"][7][1]) and back.signals["q_true"][7][3] == -np.inf
+    assert "late" not in back.signals
+
+
+def test_rows_are_copied_until_their_batch_is_written(tmp_path, params):
+    """The recorder keeps a copy of each row until the next flush: a caller that reuses one dict
+    for every sample still gets every sample."""
+    path = tmp_path / "reuse.mcap"
+    row: dict = {}
+    with McapRecorder(path, params, {}, flush_interval=1e9) as rec:
+        for k in range(30):
+            row.update(synthetic_row(k))
+            rec.write_sample(k / 60, row)
+        rec.close()
+    want = [synthetic_row(k)["det_B"] for k in range(30)]
+    assert read_log(path).signals["det_B"].tolist() == want

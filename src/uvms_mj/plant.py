@@ -470,9 +470,10 @@ class Plant:
         """Advance n physics steps.
 
         Native backend: the n steps run in one ``mj_step(m, d, nstep=n)`` from a saved state;
-        if the batch shows a problem (a MuJoCo reset warning, a non-finite or runaway state), the
-        state is restored and the steps are replayed one by one, so the divergence is reported at
-        the step where it happened, exactly as without the batch.
+        if the batch shows a problem (a MuJoCo reset, a non-finite or runaway state), the state is
+        restored and the steps are replayed one by one, so that the divergence is reported at the
+        step where it happened (the time at the end of that step; a MuJoCo reset: at its start),
+        whatever n.
 
         Raises:
             DivergenceError: the state became non-finite or exceeded ``max_speed``; the message
@@ -487,10 +488,11 @@ class Plant:
             if snap is None:
                 snap = self._snapshot = np.empty(mujoco.mj_stateSize(m, _SNAPSHOT))
             mujoco.mj_getState(m, d, snap, _SNAPSHOT)
-            t_end = d.time + n * m.opt.timestep
+            dt = m.opt.timestep
+            t_end = d.time + n * dt
             mujoco.mj_step(m, d, nstep=n)
             # a MuJoCo reset (bad qpos/qvel/qacc) restarts time: the clock tells it
-            if abs(d.time - t_end) < 0.5 * m.opt.timestep:
+            if abs(d.time - t_end) < 0.5 * dt:
                 self._check_state()
                 if self._diverged is None:
                     return
@@ -504,12 +506,16 @@ class Plant:
         m, d = self.model, self.data
         step = mujoco.mj_step
         t = d.time
+        check = self._check_state
         if served is None:
             for _ in range(n):
                 step(m, d)
                 if d.time <= t:
                     break
                 t = d.time
+                check()  # a runaway is reported at the step where it happens
+                if self._diverged is not None:
+                    break
         else:
             advance = served.advance
             for _ in range(n):
@@ -518,6 +524,9 @@ class Plant:
                     break
                 t = d.time
                 advance(t)
+                check()
+                if self._diverged is not None:
+                    break
         # MuJoCo resets the state itself on a bad qpos/qvel/qacc (and restarts time): never let
         # that pass silently. t is the time at the start of the step that failed.
         for w in (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQVEL, mujoco.mjtWarning.mjWARN_BADQPOS):

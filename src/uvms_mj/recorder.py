@@ -127,6 +127,7 @@ import datetime as _dt
 import io
 import json
 import math
+import operator
 import os
 import platform
 import re
@@ -595,6 +596,7 @@ def handle_sigterm(sigint: bool = True) -> Iterator[None]:
 
 _MESSAGE_HEADER = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, log, publish time
 _OP_MESSAGE = int(Opcode.MESSAGE)
+_OP_MESSAGE_INDEX = int(Opcode.MESSAGE_INDEX)
 
 
 class _LeanWriter(Writer):
@@ -643,17 +645,19 @@ class _LeanWriter(Writer):
             return
         st = self._Writer__statistics
         cb = self._Writer__chunk_builder
+        # the bookkeeping of Writer.add_message (statistics: once for the sample's messages) and of
+        # ChunkBuilder.add_message (per message: a chunk may end between two of them)
+        if st.message_count == 0 or log_time < st.message_start_time:
+            st.message_start_time = log_time
+        if log_time > st.message_end_time:
+            st.message_end_time = log_time
+        st.message_count += len(messages)
         counts = st.channel_message_counts
         indices = cb.message_indices
         limit = self._Writer__chunk_size
+        buf = cb.record_writer._buffer
         for cid, data in messages:
-            # the bookkeeping of Writer.add_message and ChunkBuilder.add_message
-            if st.message_count == 0 or log_time < st.message_start_time:
-                st.message_start_time = log_time
-            if log_time > st.message_end_time:
-                st.message_end_time = log_time
             counts[cid] += 1
-            st.message_count += 1
             if cb.num_messages == 0 or log_time < cb.message_start_time:
                 cb.message_start_time = log_time
             if log_time > cb.message_end_time:
@@ -661,13 +665,13 @@ class _LeanWriter(Writer):
             index = indices.get(cid)
             if index is None:
                 index = indices[cid] = MessageIndex(channel_id=cid, records=[])
-            buf = cb.record_writer._buffer
             index.records.append((log_time, buf.tell()))
             cb.num_messages += 1
             buf.write(_MESSAGE_HEADER.pack(_OP_MESSAGE, 22 + len(data), cid, sequence, log_time, publish_time))
             buf.write(data)
             if buf.tell() > limit:
                 self._Writer__maybe_finalize_chunk()
+                buf = cb.record_writer._buffer  # a new chunk
 
     def _Writer__finalize_chunk(self) -> None:  # noqa: N802 -- the Writer's private hook, overridden
         if self._zstd is None:
@@ -697,7 +701,10 @@ class _LeanWriter(Writer):
         if self._Writer__index_types & IndexType.MESSAGE:
             for cid, mi in cb.message_indices.items():
                 index.message_index_offsets[cid] = index_start + rb.count
-                mi.write(rb)
+                # MessageIndex.write's bytes, packed at once (it writes each number separately)
+                recs = [x for pair in mi.records for x in pair]
+                rb.write(struct.pack("<BQHI%dQ" % len(recs), _OP_MESSAGE_INDEX, 6 + 8 * len(recs), cid, 8 * len(recs),
+                                     *recs))
         index.message_index_length = rb.count
         self._Writer__flush()
         self._Writer__chunk_indices.append(index)
@@ -759,6 +766,31 @@ def _row_body(row: Mapping[str, Any], drop: tuple, special: tuple) -> bytes | No
     except TypeError:
         return None
     return None if b"null" in out else out
+
+
+def _batch_bodies(rows: list, plans: list) -> list[bytes] | None:
+    """The sample-channel bodies of rows holding the first row's signals, without their braces,
+    row by row then channel by channel (as :func:`_row_body` gives them, from one orjson call);
+    None where the batch cannot be encoded at once (a value orjson cannot take)."""
+    bodies = []
+    for row in rows:
+        for drop, special in plans:
+            if drop is None:  # few fields: pick them
+                body = {name: (row[name] if not (is_bool or flat) else _special(row[name], is_bool))
+                        for name, is_bool, flat in special}
+            else:  # most of the row: drop the others
+                body = dict(row)
+                for name in drop:
+                    del body[name]
+                for name, is_bool in special:
+                    body[name] = _special(body[name], is_bool)
+            bodies.append(body)
+    try:
+        text = _orjson.dumps(bodies, option=_NUMPY)
+    except TypeError:
+        return None
+    parts = text[2:-2].split(b"},{")
+    return parts if len(parts) == len(bodies) and b"{" not in text[2:-2].replace(b"},{", b"") else None
 
 
 def _sample_body(row: Mapping[str, Any], fields: list[tuple[str, bool, bool]]) -> bytes:
@@ -1257,6 +1289,8 @@ class McapRecorder:
         self._path_sent_t = 0.0
         self._path_dirty = False
         self._last_ns = 0
+        self._pending: list[tuple] = []  # samples written since the last flush, not yet encoded
+        self._js_getters: dict = {}
 
     # ---------------------------------------------------------------- channels
 
@@ -1301,7 +1335,8 @@ class McapRecorder:
             mine = {f[0] for f in fields}
             drop = tuple(n for n in row if n not in mine)
             special = tuple((n, b) for n, b, fl in fields if b or fl)
-            self._row_plans.append((drop, special) if len(drop) < len(fields) else None)
+            self._row_plans.append((drop, special) if len(drop) < len(fields) else
+                                   (None, tuple((n, b, fl) for n, b, fl in fields)))
 
         stamp = _stamp(ns)
         self._t0_stamp = stamp
@@ -1328,6 +1363,10 @@ class McapRecorder:
                 (b[2].name, "tip", self.params.tip_offset, dict(_IDENTITY)),
             ]
             self._tf_tmpl = _tf_template(self._tf_chain)
+            # the same template with positional fields: its keys' positions in [stamp, *_TF_KEYS numbers]
+            order = re.findall(r"%\((\w+)\)s", self._tf_tmpl)
+            self._tf_pos = re.sub(r"%\((\w+)\)s", "%s", self._tf_tmpl)
+            self._tf_args = operator.itemgetter(*[0 if key == "stamp" else 1 + _TF_KEYS.index(key) for key in order])
             self._js_names = [json.dumps(n) for n in JOINT_NAMES]
             self._js_tmpl = '{"timestamp":%s,"joints":[' + ",".join(
                 '{"name":%s,"position":%%s,"velocity":%%s}' % json.dumps(n).replace("%", "%%") for n in JOINT_NAMES) + "]}"
@@ -1371,7 +1410,13 @@ class McapRecorder:
 
     def write_sample(self, t: float, row: Mapping[str, Any]) -> None:
         """Record one sample (the loop's ``sink``): ``row`` maps signal names to numbers,
-        booleans or numpy arrays."""
+        booleans or numpy arrays.
+
+        The samples are encoded and written in batches, at each flush (after the first sample,
+        then at least every ``flush_interval`` s, and at close): the row (a shallow copy of it) is
+        kept until then, so its arrays must not be changed in place after the call (the loop and
+        every built-in controller give new arrays each sample). What reaches the file, and when,
+        is the same as writing each sample at once."""
         if self.closed:
             raise RuntimeError(f"recorder for {self.path} is closed")
         with _critical():
@@ -1385,44 +1430,109 @@ class McapRecorder:
                     self._warned.add(name)
                     warnings.warn(f"recorder: signal {name!r} first appeared after the first "
                                   "sample; it is not recorded", stacklevel=3)
-            k = self.samples
-            stamp = '{"sec":%d,"nsec":%d}' % divmod(ns, 1_000_000_000)
-            head = '{"timestamp":' + stamp + ',"t":' + repr(float(t))
-            out: list[tuple[int, bytes]] = []  # this sample's messages
-            head_b = head.encode()
-            for (cid, fields), plan in zip(self._sample_channels, self._row_plans):
-                body = _row_body(row, *plan) if same and plan is not None else None
-                if body is None:
-                    body = _sample_body(row, fields)
-                out.append((cid, head_b + (b"," + body[1:] if len(body) > 2 else b"}")))
-            if self._has_q and "q_true" in row:
-                q = np.asarray(row["q_true"], dtype=float).tolist()
-                qd = np.asarray(row["qd_true"], dtype=float).tolist() if "qd_true" in row else None
-                if qd is None or len(qd) != len(q):
-                    qd = None
-                half = (0.5 * q[2], 0.5 * q[3], 0.5 * q[4])
-                # one encoding for /tf (x, y, then z_i, w_i per rotation) and /joint_states
-                nums = _enc([q[0], q[1], math.sin(half[0]), math.cos(half[0]), math.sin(half[1]), math.cos(half[1]),
-                             math.sin(half[2]), math.cos(half[2])] + q + (qd or []))[1:-1].split(",")
-                vals = dict(zip(_TF_KEYS, nums))
-                vals["stamp"] = stamp
-                out.append((self._channels[TOPIC_TF], (self._tf_tmpl % vals).encode()))
-                if qd is None:
-                    js = self._js_tmpl_pos % (stamp, *nums[8:8 + len(q)])
-                else:
-                    js = self._js_tmpl % (stamp, *(x for pair in zip(nums[8:8 + len(q)], nums[8 + len(q):]) for x in pair))
-                out.append((self._channels[TOPIC_JOINTS], js.encode()))
-            if self._robot is not None:
-                self._robot.write(out, stamp, head, row)
-            self._writer.add_sample(out, ns, k)
-            if self._want_paths:
-                self._add_path_points(t, row)
-                if t - self._path_sent_t >= self.path_period - 1e-9:
-                    self._write_paths(ns)
+            self._pending.append((float(t), ns, self.samples, dict(row), same))
             self.samples += 1
             self._last_ns = ns
-            if time.monotonic() - self._last_flush >= self.flush_interval or k == 0:
+            if self.samples == 1 or time.monotonic() - self._last_flush >= self.flush_interval:
                 self.flush()
+
+    def _write_pending(self) -> None:
+        """Encode and write the samples kept since the last flush, in order (with the paths)."""
+        rows, self._pending = self._pending, []
+        if not rows:
+            return
+        encoded = self._encode_rows(rows)
+        w = self._writer
+        want_paths = self._want_paths
+        for (t, ns, k, row, _), out in zip(rows, encoded):
+            w.add_sample(out, ns, k)
+            if want_paths:
+                self._add_path_points(t, row)
+                if t - self._path_sent_t >= self.path_period - 1e-9:
+                    self._write_paths(ns, k)
+
+    def _encode_rows(self, rows: list[tuple]) -> list[list[tuple[int, bytes]]]:
+        """Each pending sample's messages (channel, data). The sample channels of rows holding
+        the first row's signals, and the paper's /tf and /joint_states, are encoded for the whole
+        batch by one orjson call each (the same bytes as :meth:`_encode_row`, which encodes the
+        others and any row with a non-finite number, see ``tests/test_recorder.py``)."""
+        n = len(rows)
+        stamps = ['{"sec":%d,"nsec":%d}' % divmod(ns, 1_000_000_000) for _, ns, _, _, _ in rows]
+        heads = [('{"timestamp":' + st + ',"t":' + repr(t)).encode() for st, (t, *_) in zip(stamps, rows)]
+        out: list[list[tuple[int, bytes]]] = [[] for _ in range(n)]
+        chans = [(cid, fields, plan) for (cid, fields), plan in zip(self._sample_channels, self._row_plans)]
+        batch = [i for i, r in enumerate(rows) if r[4]] if _orjson is not None else []
+        pieces = _batch_bodies([rows[i][3] for i in batch], [c[2] for c in chans]) if batch and chans else None
+        if pieces is None:
+            batch = []
+        fast = set(batch)
+        nc = len(chans)
+        for b, i in enumerate(batch):
+            msgs = out[i]
+            for j, (cid, fields, _) in enumerate(chans):
+                piece = pieces[b * nc + j]
+                if b"null" in piece:  # a non-finite number: the general encoding
+                    body = _sample_body(rows[i][3], fields)
+                    msgs.append((cid, heads[i] + (b"," + body[1:] if len(body) > 2 else b"}")))
+                else:
+                    msgs.append((cid, heads[i] + b"," + piece + b"}"))
+        for i in range(n):
+            if i not in fast:
+                row = rows[i][3]
+                for cid, fields, _ in chans:
+                    body = _sample_body(row, fields)
+                    out[i].append((cid, heads[i] + (b"," + body[1:] if len(body) > 2 else b"}")))
+        if self._has_q:
+            self._encode_paper_frames(rows, stamps, out)
+        if self._robot is not None:
+            for i, (_, _, _, row, _) in enumerate(rows):
+                self._robot.write(out[i], stamps[i], heads[i].decode(), row)
+        return out
+
+    def _encode_paper_frames(self, rows: list[tuple], stamps: list[str], out: list[list]) -> None:
+        """The paper robot's /tf and /joint_states messages of a batch (one orjson call)."""
+        have = [i for i, r in enumerate(rows) if "q_true" in r[3]]
+        nums_rows: list[list[float]] = []
+        vel: list[bool] = []
+        sin, cos = math.sin, math.cos
+        finite: list[bool] = []
+        for i in have:
+            row = rows[i][3]
+            q = np.asarray(row["q_true"], dtype=float).tolist()
+            qd = row.get("qd_true")
+            qd = np.asarray(qd, dtype=float).tolist() if qd is not None else None
+            if qd is None or len(qd) != len(q):
+                qd = None
+            h0, h1, h2 = 0.5 * q[2], 0.5 * q[3], 0.5 * q[4]
+            ok = math.isfinite(q[0] + q[1] + h0 + h1 + h2)
+            if not ok:  # no /tf for a non-finite pose (as for any robot); the joint states still
+                h0 = h1 = h2 = 0.0
+            # /tf: x, y, then (z_i, w_i) per rotation; /joint_states: positions, velocities
+            nums_rows.append([q[0], q[1], sin(h0), cos(h0), sin(h1), cos(h1), sin(h2), cos(h2)] + q + (qd or []))
+            vel.append(qd is not None)
+            finite.append(ok)
+        if not have:
+            return
+        text = _orjson.dumps(nums_rows).decode() if _orjson is not None else json.dumps(nums_rows, separators=(",", ":"))
+        parts = text[2:-2].split("],[")
+        if len(parts) != len(have):
+            parts = [None] * len(have)
+        tf_id, js_id = self._channels[TOPIC_TF], self._channels[TOPIC_JOINTS]
+        for part, i, nums, v, ok in zip(parts, have, nums_rows, vel, finite):
+            if part is None or "null" in part or "Infinity" in part or "NaN" in part:
+                part = _enc(nums)[1:-1]  # non-finite numbers: the general encoding
+            xs = part.split(",")
+            stamp = stamps[i]
+            if ok:
+                out[i].append((tf_id, (self._tf_pos % self._tf_args([stamp] + xs)).encode()))
+            nq = (len(xs) - 8) // (2 if v else 1)
+            getter = self._js_getters.get((nq, v))
+            if getter is None:  # positions (and velocities) interleaved per joint
+                idx = [j for q in range(nq) for j in ((8 + q, 8 + nq + q) if v else (8 + q,))]
+                getter = self._js_getters[(nq, v)] = operator.itemgetter(*idx)
+            vals = getter(xs)
+            js = (self._js_tmpl if v else self._js_tmpl_pos) % ((stamp,) + (vals if isinstance(vals, tuple) else (vals,)))
+            out[i].append((js_id, js.encode()))
 
     def _add_path_points(self, t: float, row: Mapping[str, Any]) -> None:
         for spec in self._path_specs:
@@ -1430,8 +1540,9 @@ class McapRecorder:
             v = row.get(spec.signal)
             if v is None:
                 continue
-            xs = tuple(float(v[i + j]) for j in range(spec.dims))
-            if not all(math.isfinite(x) for x in xs):
+            xs = (v[i:i + spec.dims].tolist() if type(v) is np.ndarray and v.dtype == np.float64
+                  else [float(v[i + j]) for j in range(spec.dims)])
+            if not all(map(math.isfinite, xs)):
                 continue
             if t - self._path_kept_t.get(key, -math.inf) >= self.path_resolution - 1e-9:
                 self._paths.setdefault(key, []).append(_point(*xs))
@@ -1441,7 +1552,7 @@ class McapRecorder:
                 self._path_last[key] = xs
             self._path_dirty = True
 
-    def _write_paths(self, ns: int) -> None:
+    def _write_paths(self, ns: int, sequence: int | None = None) -> None:
         stamp = _stamp(ns)
         ents, pts = [], {}
         for spec in self._path_specs:
@@ -1463,7 +1574,8 @@ class McapRecorder:
         data = _dumps({"deletions": [], "entities": ents}).decode()
         for key, arr in pts.items():
             data = data.replace(f'"@@{key}@@"', arr, 1)
-        self._writer.add_message(self._channels[TOPIC_PATHS], ns, data.encode(), ns, self.samples)
+        self._writer.add_message(self._channels[TOPIC_PATHS], ns, data.encode(), ns,
+                                 self.samples if sequence is None else sequence)
 
     def flush(self) -> None:
         """Finish the chunk in progress and flush the file (done automatically every
@@ -1471,6 +1583,7 @@ class McapRecorder:
         if self.closed:
             return
         with _critical():
+            self._write_pending()
             self._writer.flush()
             self._last_flush = time.monotonic()
 
@@ -1483,6 +1596,7 @@ class McapRecorder:
             self.closed = True
             self.status = status
             try:
+                self._write_pending()
                 if self._want_paths_pending():
                     self._write_paths(self._last_ns)
                 self._writer.flush()  # the last chunk goes before the status record

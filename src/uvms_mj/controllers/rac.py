@@ -351,15 +351,17 @@ class RAC(Controller):
         t = k * self.T
         off = self._base_offset[k]
         tip = self._tip_d(t)
+        cache = self._base_d
+        if cache is None or cache[0] is not off:  # the base's desired part: new only when the offset is
+            if self.free:
+                base = self._ref_pos + off
+            else:
+                base = self._ref_pos.copy()
+                base[self.lin] += off
+            cache = self._base_d = (off, base)
+        vec = np.concatenate((cache[1], tip))
         if self.free:
-            vec = np.concatenate((self._ref_pos + off, tip))
-            rots = [self._ref_R] + ([self._tip_R_d(t)] if self.tip_orientation else [])
-            return vec, rots
-        vec = np.empty(self.ntask)
-        nb = self._ref_pos.size
-        vec[:nb] = self._ref_pos
-        vec[self.lin] += off
-        vec[nb:] = tip
+            return vec, [self._ref_R] + ([self._tip_R_d(t)] if self.tip_orientation else [])
         return vec, []
 
     def _tip_d(self, t: float) -> np.ndarray:
@@ -416,6 +418,7 @@ class RAC(Controller):
         self.singular = SingularHandler(self.js, self.js_high, self.n_ramp, self._v_event,
                                         size=3 if self.free else self.lin.size)
         self._base_offset = {m.k: np.zeros(3 if self.free else self.lin.size)}
+        self._base_d = None  # (offset, base part of p_d) of the last _desired
         self._k0 = m.k
         self._pd_prev = self._desired(m.k)
         self._pd_next = None
