@@ -638,40 +638,59 @@ class _LeanWriter(Writer):
     def add_sample(self, messages, log_time: int, sequence: int, publish_time: int | None = None) -> None:
         """Add messages ``(channel_id, data)`` that share one log time, publish time (default:
         the log time) and sequence, in that order (the same as one :meth:`add_message` each)."""
-        publish_time = log_time if publish_time is None else publish_time
+        self._add([(messages, log_time, sequence)], publish_time)
+
+    def add_samples(self, samples) -> None:
+        """:meth:`add_sample` for a list of ``(messages, log_time, sequence)`` (publish time = log
+        time), in order."""
+        self._add(samples, None)
+
+    def _add(self, samples, publish: int | None) -> None:
         if not self._lean:
-            for cid, data in messages:
-                Writer.add_message(self, cid, log_time, data, publish_time, sequence)
+            for messages, log_time, sequence in samples:
+                for cid, data in messages:
+                    Writer.add_message(self, cid, log_time, data, log_time if publish is None else publish, sequence)
             return
         st = self._Writer__statistics
         cb = self._Writer__chunk_builder
-        # the bookkeeping of Writer.add_message (statistics: once for the sample's messages) and of
-        # ChunkBuilder.add_message (per message: a chunk may end between two of them)
-        if st.message_count == 0 or log_time < st.message_start_time:
-            st.message_start_time = log_time
-        if log_time > st.message_end_time:
-            st.message_end_time = log_time
-        st.message_count += len(messages)
         counts = st.channel_message_counts
         indices = cb.message_indices
         limit = self._Writer__chunk_size
+        pack = _MESSAGE_HEADER.pack
         buf = cb.record_writer._buffer
-        for cid, data in messages:
-            counts[cid] += 1
+        pos = buf.tell()
+        parts: list[bytes] = []
+        for messages, log_time, sequence in samples:
+            # the bookkeeping of Writer.add_message (statistics) and ChunkBuilder.add_message
+            if st.message_count == 0 or log_time < st.message_start_time:
+                st.message_start_time = log_time
+            if log_time > st.message_end_time:
+                st.message_end_time = log_time
+            st.message_count += len(messages)
             if cb.num_messages == 0 or log_time < cb.message_start_time:
                 cb.message_start_time = log_time
             if log_time > cb.message_end_time:
                 cb.message_end_time = log_time
-            index = indices.get(cid)
-            if index is None:
-                index = indices[cid] = MessageIndex(channel_id=cid, records=[])
-            index.records.append((log_time, buf.tell()))
-            cb.num_messages += 1
-            buf.write(_MESSAGE_HEADER.pack(_OP_MESSAGE, 22 + len(data), cid, sequence, log_time, publish_time))
-            buf.write(data)
-            if buf.tell() > limit:
-                self._Writer__maybe_finalize_chunk()
-                buf = cb.record_writer._buffer  # a new chunk
+            pub = log_time if publish is None else publish
+            for cid, data in messages:
+                counts[cid] += 1
+                index = indices.get(cid)
+                if index is None:
+                    index = indices[cid] = MessageIndex(channel_id=cid, records=[])
+                index.records.append((log_time, pos))
+                cb.num_messages += 1
+                parts.append(pack(_OP_MESSAGE, 22 + len(data), cid, sequence, log_time, pub))
+                parts.append(data)
+                pos += 31 + len(data)  # the record: 9 bytes of opcode and length, 22 of fields, the data
+                if pos > limit:  # as the Writer: the chunk ends after the message that fills it
+                    buf.write(b"".join(parts))
+                    parts = []
+                    self._Writer__maybe_finalize_chunk()
+                    buf = cb.record_writer._buffer  # a new chunk, starting at this sample's time
+                    pos = buf.tell()
+                    cb.message_start_time = cb.message_end_time = log_time
+        if parts:
+            buf.write(b"".join(parts))
 
     def _Writer__finalize_chunk(self) -> None:  # noqa: N802 -- the Writer's private hook, overridden
         if self._zstd is None:
@@ -790,7 +809,8 @@ def _batch_bodies(rows: list, plans: list) -> list[bytes] | None:
     except TypeError:
         return None
     parts = text[2:-2].split(b"},{")
-    return parts if len(parts) == len(bodies) and b"{" not in text[2:-2].replace(b"},{", b"") else None
+    # no body holds an object (values are numbers and arrays): one "{" per body
+    return parts if len(parts) == len(bodies) and text.count(b"{") == len(bodies) else None
 
 
 def _sample_body(row: Mapping[str, Any], fields: list[tuple[str, bool, bool]]) -> bytes:
@@ -1285,12 +1305,12 @@ class McapRecorder:
         self._paths: dict[str, list[str]] = {}
         self._path_last: dict[str, tuple[float, ...] | None] = {}
         self._path_kept_t: dict[str, float] = {}
+        self._path_recent: dict[str, list] = {}  # rows since the last kept point (their last finite value ends the strip)
         self._path_specs: tuple[_PathSpec, ...] = ()
         self._path_sent_t = 0.0
         self._path_dirty = False
         self._last_ns = 0
         self._pending: list[tuple] = []  # samples written since the last flush, not yet encoded
-        self._js_getters: dict = {}
 
     # ---------------------------------------------------------------- channels
 
@@ -1443,13 +1463,17 @@ class McapRecorder:
             return
         encoded = self._encode_rows(rows)
         w = self._writer
-        want_paths = self._want_paths
-        for (t, ns, k, row, _), out in zip(rows, encoded):
-            w.add_sample(out, ns, k)
-            if want_paths:
-                self._add_path_points(t, row)
-                if t - self._path_sent_t >= self.path_period - 1e-9:
-                    self._write_paths(ns, k)
+        if not self._want_paths:
+            w.add_samples([(out, ns, k) for (_, ns, k, _, _), out in zip(rows, encoded)])
+            return
+        start = 0
+        for n, ((t, ns, k, row, _), out) in enumerate(zip(rows, encoded)):
+            self._add_path_points(t, row)
+            if t - self._path_sent_t >= self.path_period - 1e-9:  # the paths follow this sample's messages
+                w.add_samples([(o, r[1], r[2]) for r, o in zip(rows[start:n + 1], encoded[start:n + 1])])
+                start = n + 1
+                self._write_paths(ns, k)
+        w.add_samples([(o, r[1], r[2]) for r, o in zip(rows[start:], encoded[start:])])
 
     def _encode_rows(self, rows: list[tuple]) -> list[list[tuple[int, bytes]]]:
         """Each pending sample's messages (channel, data). The sample channels of rows holding
@@ -1458,7 +1482,7 @@ class McapRecorder:
         others and any row with a non-finite number, see ``tests/test_recorder.py``)."""
         n = len(rows)
         stamps = ['{"sec":%d,"nsec":%d}' % divmod(ns, 1_000_000_000) for _, ns, _, _, _ in rows]
-        heads = [('{"timestamp":' + st + ',"t":' + repr(t)).encode() for st, (t, *_) in zip(stamps, rows)]
+        heads = [('{"timestamp":%s,"t":%r' % (st, r[0])).encode() for st, r in zip(stamps, rows)]
         out: list[list[tuple[int, bytes]]] = [[] for _ in range(n)]
         chans = [(cid, fields, plan) for (cid, fields), plan in zip(self._sample_channels, self._row_plans)]
         batch = [i for i, r in enumerate(rows) if r[4]] if _orjson is not None else []
@@ -1467,15 +1491,17 @@ class McapRecorder:
             batch = []
         fast = set(batch)
         nc = len(chans)
-        for b, i in enumerate(batch):
-            msgs = out[i]
-            for j, (cid, fields, _) in enumerate(chans):
-                piece = pieces[b * nc + j]
-                if b"null" in piece:  # a non-finite number: the general encoding
-                    body = _sample_body(rows[i][3], fields)
-                    msgs.append((cid, heads[i] + (b"," + body[1:] if len(body) > 2 else b"}")))
-                else:
-                    msgs.append((cid, heads[i] + b"," + piece + b"}"))
+        cids = [c[0] for c in chans]
+        if batch:
+            datas = [b"%s,%s}" % (heads[i], piece) for i, piece in zip((i for i in batch for _ in cids), pieces)]
+            for b, i in enumerate(batch):
+                out[i] = list(zip(cids, datas[b * nc:(b + 1) * nc]))
+            if any(b"null" in p for p in pieces):  # a non-finite number: the general encoding
+                for b, i in enumerate(batch):
+                    for j, (cid, fields, _) in enumerate(chans):
+                        if b"null" in pieces[b * nc + j]:
+                            body = _sample_body(rows[i][3], fields)
+                            out[i][j] = (cid, heads[i] + (b"," + body[1:] if len(body) > 2 else b"}"))
         for i in range(n):
             if i not in fast:
                 row = rows[i][3]
@@ -1490,69 +1516,95 @@ class McapRecorder:
         return out
 
     def _encode_paper_frames(self, rows: list[tuple], stamps: list[str], out: list[list]) -> None:
-        """The paper robot's /tf and /joint_states messages of a batch (one orjson call)."""
+        """The paper robot's /tf and /joint_states messages of a batch: the numbers of every row
+        at once (numpy's sin and cos of the half angles, one orjson call), then one template each.
+        A row without a finite pose gets no /tf (as for any robot), its joint states the general
+        encoding of its numbers (+-inf as +-1e999)."""
         have = [i for i, r in enumerate(rows) if "q_true" in r[3]]
-        nums_rows: list[list[float]] = []
-        vel: list[bool] = []
-        sin, cos = math.sin, math.cos
-        finite: list[bool] = []
-        for i in have:
-            row = rows[i][3]
-            q = np.asarray(row["q_true"], dtype=float).tolist()
-            qd = row.get("qd_true")
-            qd = np.asarray(qd, dtype=float).tolist() if qd is not None else None
-            if qd is None or len(qd) != len(q):
-                qd = None
-            h0, h1, h2 = 0.5 * q[2], 0.5 * q[3], 0.5 * q[4]
-            ok = math.isfinite(q[0] + q[1] + h0 + h1 + h2)
-            if not ok:  # no /tf for a non-finite pose (as for any robot); the joint states still
-                h0 = h1 = h2 = 0.0
-            # /tf: x, y, then (z_i, w_i) per rotation; /joint_states: positions, velocities
-            nums_rows.append([q[0], q[1], sin(h0), cos(h0), sin(h1), cos(h1), sin(h2), cos(h2)] + q + (qd or []))
-            vel.append(qd is not None)
-            finite.append(ok)
-        if not have:
-            return
-        text = _orjson.dumps(nums_rows).decode() if _orjson is not None else json.dumps(nums_rows, separators=(",", ":"))
-        parts = text[2:-2].split("],[")
-        if len(parts) != len(have):
-            parts = [None] * len(have)
+        with_qd = [i for i in have if np.shape(rows[i][3].get("qd_true", ())) == (5,)]
+        if len(with_qd) == len(have):
+            groups = [(have, True)]
+        else:  # rows without the velocities: positions only
+            got = set(with_qd)
+            groups = [(with_qd, True), ([i for i in have if i not in got], False)]
+        for group, vel in groups:
+            if group:
+                self._encode_frames(rows, stamps, out, group, vel)
+
+    def _encode_frames(self, rows: list[tuple], stamps: list[str], out: list[list], group: list[int],
+                       vel: bool) -> None:
+        Q = np.array([np.asarray(rows[i][3]["q_true"], dtype=float) for i in group])
+        M = np.empty((len(group), 18 if vel else 13))
+        M[:, 0:2] = Q[:, :2]
+        H = 0.5 * Q[:, 2:5]
+        ok = np.isfinite(M[:, 0:2]).all(axis=1) & np.isfinite(H).all(axis=1)
+        H[~ok] = 0.0
+        M[:, 2:8:2], M[:, 3:8:2] = np.sin(H), np.cos(H)  # (z_i, w_i) of each rotation about +Z
+        M[:, 8:13] = Q
+        if vel:
+            M[:, 13:18] = np.array([np.asarray(rows[i][3]["qd_true"], dtype=float) for i in group])
+        text = _orjson.dumps(M, option=_NUMPY).decode() if _orjson is not None else ""
+        parts = text[2:-2].split("],[") if text else []
+        if len(parts) != len(group):
+            parts = [None] * len(group)
         tf_id, js_id = self._channels[TOPIC_TF], self._channels[TOPIC_JOINTS]
-        for part, i, nums, v, ok in zip(parts, have, nums_rows, vel, finite):
-            if part is None or "null" in part or "Infinity" in part or "NaN" in part:
-                part = _enc(nums)[1:-1]  # non-finite numbers: the general encoding
+        tf_pos, tf_args = self._tf_pos, self._tf_args
+        js_tmpl = self._js_tmpl if vel else self._js_tmpl_pos
+        js_args = operator.itemgetter(*([j for q in range(5) for j in (8 + q, 13 + q)] if vel else range(8, 13)))
+        for b, (part, i) in enumerate(zip(parts, group)):
+            if part is None or "null" in part:
+                part = _enc(M[b].tolist())[1:-1]  # non-finite numbers: the general encoding
             xs = part.split(",")
             stamp = stamps[i]
-            if ok:
-                out[i].append((tf_id, (self._tf_pos % self._tf_args([stamp] + xs)).encode()))
-            nq = (len(xs) - 8) // (2 if v else 1)
-            getter = self._js_getters.get((nq, v))
-            if getter is None:  # positions (and velocities) interleaved per joint
-                idx = [j for q in range(nq) for j in ((8 + q, 8 + nq + q) if v else (8 + q,))]
-                getter = self._js_getters[(nq, v)] = operator.itemgetter(*idx)
-            vals = getter(xs)
-            js = (self._js_tmpl if v else self._js_tmpl_pos) % ((stamp,) + (vals if isinstance(vals, tuple) else (vals,)))
-            out[i].append((js_id, js.encode()))
+            if ok[b]:
+                out[i].append((tf_id, (tf_pos % tf_args([stamp] + xs)).encode()))
+            out[i].append((js_id, (js_tmpl % ((stamp,) + js_args(xs))).encode()))
 
     def _add_path_points(self, t: float, row: Mapping[str, Any]) -> None:
+        """A point every ``path_resolution`` s of run time (the first finite value from then on);
+        the rows between are only kept: the last finite value among them ends the strip when it
+        is sent (:meth:`_settle_paths`)."""
+        res = self.path_resolution - 1e-9
         for spec in self._path_specs:
-            key, i = spec.key, spec.start
-            v = row.get(spec.signal)
-            if v is None:
+            key = spec.key
+            if t - self._path_kept_t.get(key, -math.inf) < res:
+                self._path_recent.setdefault(key, []).append(row)
                 continue
-            xs = (v[i:i + spec.dims].tolist() if type(v) is np.ndarray and v.dtype == np.float64
-                  else [float(v[i + j]) for j in range(spec.dims)])
-            if not all(map(math.isfinite, xs)):
+            xs = self._path_value(spec, row)
+            if xs is None:
                 continue
-            if t - self._path_kept_t.get(key, -math.inf) >= self.path_resolution - 1e-9:
-                self._paths.setdefault(key, []).append(_point(*xs))
-                self._path_kept_t[key] = t
-                self._path_last[key] = None
-            else:
-                self._path_last[key] = xs
+            self._paths.setdefault(key, []).append(_point(*xs))
+            self._path_kept_t[key] = t
+            self._path_last[key] = None
+            self._path_recent[key] = []
             self._path_dirty = True
 
+    @staticmethod
+    def _path_value(spec: "_PathSpec", row: Mapping[str, Any]) -> list | None:
+        v = row.get(spec.signal)
+        if v is None:
+            return None
+        i = spec.start
+        xs = (v[i:i + spec.dims].tolist() if type(v) is np.ndarray and v.dtype == np.float64
+              else [float(v[i + j]) for j in range(spec.dims)])
+        return xs if all(map(math.isfinite, xs)) else None
+
+    def _settle_paths(self) -> None:
+        """The strips' last points from the rows kept since each strip's last point."""
+        for spec in self._path_specs:
+            recent = self._path_recent.get(spec.key)
+            if not recent:
+                continue
+            for row in reversed(recent):
+                xs = self._path_value(spec, row)
+                if xs is not None:
+                    self._path_last[spec.key] = xs
+                    self._path_dirty = True
+                    break
+            self._path_recent[spec.key] = []
+
     def _write_paths(self, ns: int, sequence: int | None = None) -> None:
+        self._settle_paths()
         stamp = _stamp(ns)
         ents, pts = [], {}
         for spec in self._path_specs:
@@ -1610,7 +1662,10 @@ class McapRecorder:
                 self._file.close()
 
     def _want_paths_pending(self) -> bool:
-        return bool(getattr(self, "_want_paths", False) and self._path_dirty)
+        if not getattr(self, "_want_paths", False):
+            return False
+        self._settle_paths()
+        return bool(self._path_dirty)
 
     def __enter__(self) -> "McapRecorder":
         return self
