@@ -106,11 +106,18 @@ when the package runs from a checkout, else written into the wheel when it was b
 is stored as JSON text (MCAP metadata is string -> string).
 
 Durability: data reaches the file at least every ``flush_interval`` seconds of wall-clock time
-while samples arrive (checked at each sample, and always after the first one: the chunk in
-progress is finished and the file object flushed), so a process killed with
-``kill -9`` leaves a log readable (by :func:`read_log`, not by MCAP's indexed readers) up to the
-last flush. Exceptions, KeyboardInterrupt and (inside :func:`handle_sigterm`) SIGTERM close
-the log cleanly with a status record.
+while samples arrive (checked at each sample, and always after the first one: the samples since
+the last flush are encoded and written, the chunk in progress is finished and the file object
+flushed), so a process killed with ``kill -9`` leaves a log readable (by :func:`read_log`, not
+by MCAP's indexed readers) up to the last flush. Exceptions, KeyboardInterrupt and (inside
+:func:`handle_sigterm`) SIGTERM close the log cleanly with a status record.
+
+Speed: the samples are encoded in batches at each flush (per batch one orjson call for the
+sample channels and one for the paper's /tf and /joint_states numbers; the same bytes as one
+sample at a time, which irregular rows -- a non-finite number, a missing or late signal -- still
+take), added to the chunk in one call per batch, and compressed by one reused zstd compressor
+at level 1 (:class:`_LeanWriter`). A row is kept (a shallow copy) until its batch is written:
+its arrays must not be changed in place after :meth:`McapRecorder.write_sample`.
 
 Typical use (e.g. in the CLI)::
 
@@ -769,28 +776,12 @@ def _special(v: Any, is_bool: bool) -> Any:
     return np.ravel(v)
 
 
-def _row_body(row: Mapping[str, Any], drop: tuple, special: tuple) -> bytes | None:
-    """:func:`_sample_body` for a row holding every signal of the first row (and no other):
-    a copy of the row without ``drop``, ``special`` fields converted; None where the general
-    path is needed."""
-    if _orjson is None:
-        return None
-    body = dict(row)
-    for name in drop:
-        del body[name]
-    for name, is_bool in special:
-        body[name] = _special(body[name], is_bool)
-    try:
-        out = _orjson.dumps(body, option=_NUMPY)
-    except TypeError:
-        return None
-    return None if b"null" in out else out
-
-
 def _batch_bodies(rows: list, plans: list) -> list[bytes] | None:
     """The sample-channel bodies of rows holding the first row's signals, without their braces,
-    row by row then channel by channel (as :func:`_row_body` gives them, from one orjson call);
-    None where the batch cannot be encoded at once (a value orjson cannot take)."""
+    row by row then channel by channel (what :func:`_sample_body` gives each, from one orjson
+    call): per channel either the row without the other signals (``drop``) or its few fields
+    picked; ``special`` fields converted (booleans to 0/1, 2-D arrays flattened). None where the
+    batch cannot be encoded at once (a value orjson cannot take)."""
     bodies = []
     for row in rows:
         for drop, special in plans:
@@ -1387,7 +1378,6 @@ class McapRecorder:
             order = re.findall(r"%\((\w+)\)s", self._tf_tmpl)
             self._tf_pos = re.sub(r"%\((\w+)\)s", "%s", self._tf_tmpl)
             self._tf_args = operator.itemgetter(*[0 if key == "stamp" else 1 + _TF_KEYS.index(key) for key in order])
-            self._js_names = [json.dumps(n) for n in JOINT_NAMES]
             self._js_tmpl = '{"timestamp":%s,"joints":[' + ",".join(
                 '{"name":%s,"position":%%s,"velocity":%%s}' % json.dumps(n).replace("%", "%%") for n in JOINT_NAMES) + "]}"
             self._js_tmpl_pos = '{"timestamp":%s,"joints":[' + ",".join(
