@@ -92,31 +92,33 @@ def test_wls_saturation_falls_back_to_the_allocator():
                       flag_mismatch=0.01)  # a thruster exactly at its limit in one run, a hair inside in the other
 
 
-def test_kernel_off_runs_the_python_code(monkeypatch):
+@pytest.fixture
+def kernel_mode(monkeypatch):
+    """Set UVMS_MJ_KERNEL and load afresh (the process's loaded kernel is restored after)."""
+    saved = (kernel._tried, kernel._lib, kernel._reason)
+
+    def load(mode: str):
+        monkeypatch.setenv(kernel.ENV_KERNEL, mode)
+        kernel._tried, kernel._lib, kernel._reason = False, None, None
+        return kernel.library()
+
+    yield load
+    kernel._tried, kernel._lib, kernel._reason = saved
+
+
+def test_kernel_off_runs_the_python_code(kernel_mode):
     """UVMS_MJ_KERNEL=off: every RAC on its Python code, and the reason is said."""
-    monkeypatch.setattr(kernel, "_tried", False)
-    monkeypatch.setattr(kernel, "_lib", None)
-    monkeypatch.setenv(kernel.ENV_KERNEL, "off")
-    try:
-        assert kernel.library() is None
-        assert "UVMS_MJ_KERNEL=off" in kernel.unavailable_reason()
-        res = _run("paper", ["duration=1"], False)
-        assert res.status == "ok"
-    finally:
-        monkeypatch.setattr(kernel, "_tried", False)
-        monkeypatch.setattr(kernel, "_reason", None)
+    assert kernel_mode("off") is None
+    assert "UVMS_MJ_KERNEL=off" in kernel.unavailable_reason()
+    sc = load_scenario(SCEN / "paper.yaml", ["duration=1"])
+    plant, ctrl = build(sc)
+    res = run_closed_loop(plant, ctrl, sc.duration, T=ctrl.T)
+    assert res.status == "ok" and ctrl._ws is None
 
 
-def test_bad_kernel_mode_is_named(monkeypatch):
-    monkeypatch.setattr(kernel, "_tried", False)
-    monkeypatch.setattr(kernel, "_lib", None)
-    monkeypatch.setenv(kernel.ENV_KERNEL, "fast")
-    try:
-        assert kernel.library() is None
-        assert "UVMS_MJ_KERNEL='fast' is not one of auto, off" in kernel.unavailable_reason()
-    finally:
-        monkeypatch.setattr(kernel, "_tried", False)
-        monkeypatch.setattr(kernel, "_reason", None)
+def test_bad_kernel_mode_is_named(kernel_mode):
+    assert kernel_mode("fast") is None
+    assert "UVMS_MJ_KERNEL='fast' is not one of auto, off" in kernel.unavailable_reason()
 
 
 # ----------------------------------------------------------------------------- Eq. 12 handler
