@@ -778,3 +778,21 @@ def test_rows_are_copied_until_their_batch_is_written(tmp_path, params):
         rec.close()
     want = [synthetic_row(k)["det_B"] for k in range(30)]
     assert read_log(path).signals["det_B"].tolist() == want
+
+
+def test_a_row_that_cannot_be_encoded_ends_the_log_cleanly(tmp_path, params):
+    """A value the encoder cannot take (None for a boolean signal) at sample 10 of a batch: the
+    samples before it are written, the log is finished with status "error" naming the problem,
+    and the exception reaches the caller."""
+    path = tmp_path / "bad.mcap"
+    rec = McapRecorder(path, params, {}, flush_interval=1e9)
+    for k in range(20):
+        row = synthetic_row(k)
+        if k == 10:
+            row["dls_active"] = None
+        rec.write_sample(k / 60, row)
+    with pytest.raises(TypeError):
+        rec.close()
+    log = read_log(path)
+    assert len(log.t) == 10 and not log.truncated
+    assert log.status == "error" and "recorder: TypeError" in log.reason

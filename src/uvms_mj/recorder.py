@@ -1451,7 +1451,20 @@ class McapRecorder:
         rows, self._pending = self._pending, []
         if not rows:
             return
-        encoded = self._encode_rows(rows)
+        try:
+            encoded = self._encode_rows(rows)
+        except Exception:  # a row that cannot be encoded: write the rows before it, then raise
+            encoded = []
+            for n, row in enumerate(rows):
+                try:
+                    encoded += self._encode_rows([row])
+                except Exception:
+                    rows = rows[:n]
+                    self._write_encoded(rows, encoded)
+                    raise
+        self._write_encoded(rows, encoded)
+
+    def _write_encoded(self, rows: list[tuple], encoded: list[list[tuple[int, bytes]]]) -> None:
         w = self._writer
         if not self._want_paths:
             w.add_samples([(out, ns, k) for (_, ns, k, _, _), out in zip(rows, encoded)])
@@ -1510,7 +1523,7 @@ class McapRecorder:
         at once (numpy's sin and cos of the half angles, one orjson call), then one template each.
         A row without a finite pose gets no /tf (as for any robot), its joint states the general
         encoding of its numbers (+-inf as +-1e999)."""
-        have = [i for i, r in enumerate(rows) if "q_true" in r[3]]
+        have = [i for i, r in enumerate(rows) if np.shape(r[3].get("q_true", ())) == (5,)]  # (others: none)
         with_qd = [i for i in have if np.shape(rows[i][3].get("qd_true", ())) == (5,)]
         if len(with_qd) == len(have):
             groups = [(have, True)]
@@ -1636,9 +1649,14 @@ class McapRecorder:
             return
         with _critical():
             self.closed = True
-            self.status = status
+            failed = None
             try:
-                self._write_pending()
+                try:
+                    self._write_pending()
+                except Exception as exc:  # a sample that cannot be encoded: finish the log, then raise
+                    failed = exc
+                    status, reason = "error", f"recorder: {exc!r}" + (f" ({reason})" if reason else "")
+                self.status = status
                 if self._want_paths_pending():
                     self._write_paths(self._last_ns)
                 self._writer.flush()  # the last chunk goes before the status record
@@ -1650,6 +1668,8 @@ class McapRecorder:
                 self._file.flush()
             finally:
                 self._file.close()
+            if failed is not None:
+                raise failed
 
     def _want_paths_pending(self) -> bool:
         if not getattr(self, "_want_paths", False):
