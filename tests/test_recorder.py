@@ -693,12 +693,12 @@ def test_lean_writer_writes_what_mcaps_writer_writes(compression):
     from mcap.records import Chunk, ChunkIndex
     from mcap.writer import CompressionType, Writer
 
-    from uvms_mj.recorder import _LeanWriter
+    from uvms_mj.mcap_writer import LeanWriter
 
     comp = CompressionType[compression]
     stock = _writer_bytes(Writer, comp)
-    lean = _writer_bytes(_LeanWriter, comp)
-    assert _writer_bytes(_LeanWriter, comp, batched=True) == lean
+    lean = _writer_bytes(LeanWriter, comp)
+    assert _writer_bytes(LeanWriter, comp, batched=True) == lean
     if compression != "ZSTD":
         assert lean == stock
         return
