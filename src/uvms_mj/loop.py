@@ -86,12 +86,35 @@ def _quantize(x: np.ndarray, quantum: float) -> np.ndarray:
     return np.round(x / quantum) * quantum if quantum > 0 else x
 
 
+def _observe(plant) -> tuple:
+    """(q, qd, tip, thrust or None) now: Plant.observe, else the plant's properties."""
+    if hasattr(plant, "observe"):
+        return plant.observe()
+    return plant.q, plant.qd, plant.tip_position, None
+
+
+def _command(plant, thrust: np.ndarray, torques: np.ndarray) -> None:
+    if hasattr(plant, "command"):
+        plant.command(thrust, torques)
+    else:
+        plant.set_thrust(thrust)
+        plant.set_joint_torques(torques)
+
+
+def _step_observe(plant, n: int) -> tuple:
+    if hasattr(plant, "step_observe"):
+        return plant.step_observe(n)
+    plant.step(n)
+    return plant.q, plant.qd, plant.tip_position, None
+
+
 def controller_name(controller: Controller) -> str:
     """The controller's registry name, else its class name (a plug-in created directly)."""
     return str(getattr(controller, "name", "") or type(controller).__name__)
 
 
-def measure_robot(plant, layout, sensor: SensorModel, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray | None]:
+def measure_robot(plant, layout, sensor: SensorModel, rng: np.random.Generator, q_true: np.ndarray | None = None,
+                  qd_true: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
     """(qpos, qvel or None) as measured on a floating robot (:class:`uvms_mj.robot.RobotPlant`).
 
     Noise: ``position_noise`` on the vehicle's world position (3), ``attitude_noise`` as a
@@ -100,8 +123,9 @@ def measure_robot(plant, layout, sensor: SensorModel, rng: np.random.Generator) 
     (``position_quantum``) and the joint angles (``angle_quantum``; the quaternion is not
     quantized); ``velocity_sensor``: the true qvel (v world, omega body, joint rates) plus
     ``velocity_noise``. Random numbers are drawn in that order, only for non-zero stds.
+    ``q_true`` / ``qd_true``: the state to measure (default: the plant's now).
     """
-    q = plant.q
+    q = plant.q if q_true is None else np.array(q_true, dtype=float)
     a = layout.base_qadr
     att_noise = sensor.angle_noise if sensor.attitude_noise is None else sensor.attitude_noise
     joint_noise = sensor.angle_noise if sensor.joint_noise is None else sensor.joint_noise
@@ -119,7 +143,7 @@ def measure_robot(plant, layout, sensor: SensorModel, rng: np.random.Generator) 
         q[ja] = _quantize(q[ja], sensor.angle_quantum)
     qd = None
     if sensor.velocity_sensor:
-        qd = plant.qd
+        qd = plant.qd if qd_true is None else np.array(qd_true, dtype=float)
         if sensor.velocity_noise:
             qd = qd + rng.normal(0.0, sensor.velocity_noise, qd.size)
     return q, qd
@@ -168,23 +192,23 @@ def run_closed_loop(
 
     layout = getattr(plant, "layout", None)  # a RobotPlant (any robot): its own measurement layout
 
-    def measure(k: int) -> Measurement:
+    def measure(k: int, q_true: np.ndarray, qd_true: np.ndarray) -> Measurement:
         nonlocal q_prev_meas
         if layout is not None:
-            q, qd = measure_robot(plant, layout, sensor, rng)
+            q, qd = measure_robot(plant, layout, sensor, rng, q_true, qd_true)
             if sensor.delay:
                 q_out = q if q_prev_meas is None else q_prev_meas
                 q_prev_meas = q
                 q = q_out
             return Measurement(k=k, t=k * T, q=q, qd=qd)
-        q = plant.q
+        q = q_true.copy()
         if noisy:
             q = q + np.concatenate((rng.normal(0, sensor.position_noise, 2), rng.normal(0, angle_std)))
         if quantized:
             q = np.concatenate((_quantize(q[:2], sensor.position_quantum), _quantize(q[2:], sensor.angle_quantum)))
         qd = None
         if sensor.velocity_sensor:
-            qd = plant.qd + (rng.normal(0, sensor.velocity_noise, 5) if sensor.velocity_noise else 0.0)
+            qd = qd_true + (rng.normal(0, sensor.velocity_noise, 5) if sensor.velocity_noise else 0.0)
         if sensor.delay:
             q_out = q if q_prev_meas is None else q_prev_meas
             q_prev_meas = q
@@ -192,10 +216,14 @@ def run_closed_loop(
         return Measurement(k=k, t=k * T, q=q, qd=qd)
 
     on_event = getattr(plant, "on_sample", None)  # scheduled plant events (e.g. a payload pick-up)
+    # the state at each sample: observed once, then read by each step (Plant.step_observe: the
+    # compiled sample where it can); the thrust read after the commands where it follows them
+    state = _observe(plant)
     for k in range(n):
         if on_event is not None:
             on_event(k * T)
-        meas = measure(k)
+        q_true, qd_true, tip_true, thr_lagged = state
+        meas = measure(k, q_true, qd_true)
         if k == 0:
             controller.reset(meas)
         cmd: Command = controller.compute(meas)
@@ -211,8 +239,7 @@ def run_closed_loop(
             status, reason = "diverged", (f"controller command {big:.3g} (N or N m) beyond {COMMAND_ABS_MAX:g} "
                                           f"at t = {k * T:.4f} s")
             break
-        plant.set_thrust(thrust)
-        plant.set_joint_torques(torques)
+        _command(plant, thrust, torques)
         if k == 0 and warm_start:
             if layout is not None:
                 plant.warm_start(thrust)
@@ -221,8 +248,8 @@ def run_closed_loop(
         times.append(k * T)
         row = dict(cmd.signals)
         row.update(
-            q_true=plant.q, qd_true=plant.qd, tip_true=plant.tip_position, q_measured=meas.q,
-            thrust_command=thrust, thrust_force=plant.thruster_forces, torques=torques,
+            q_true=q_true, qd_true=qd_true, tip_true=tip_true, q_measured=meas.q, thrust_command=thrust,
+            thrust_force=thr_lagged if thr_lagged is not None and k > 0 else plant.thruster_forces, torques=torques,
         )
         rows.append(row)
         if sink is not None:
@@ -232,7 +259,7 @@ def run_closed_loop(
         if k == n - 1:
             break
         try:
-            plant.step(sub)
+            state = _step_observe(plant, sub)
         except DivergenceError as exc:
             status, reason = "diverged", str(exc)
             break

@@ -449,20 +449,93 @@ class Plant:
         MuJoCo clamps the command to the force range and lags it by tau (first order).
         With ``dead_zone`` on, commands inside the dead zone give no thrust.
         """
+        self.data.ctrl[self._thr] = self._thrust_ctrl(commands)
+
+    def _thrust_ctrl(self, commands: Sequence[float]) -> np.ndarray:
+        """The thrusters' actuator commands for thrusts [N] (checked; the dead zone applied)."""
         c = np.asarray(commands, dtype=float)
         if c.shape != (3,) or not _finite(c):
             raise ValueError(f"thruster commands {commands!r} must be 3 finite numbers [N]")
         if self.dead_zone:
             lo, hi = self.params.dead_zone
             c = np.where((c > lo) & (c < hi), 0.0, c)
-        self.data.ctrl[self._thr] = c
+        return c
 
     def set_joint_torques(self, torques: Sequence[float]) -> None:
         """Command the two joint torques [N m], held until changed."""
+        self.data.ctrl[self._mot] = self._torque_ctrl(torques)
+
+    def _torque_ctrl(self, torques: Sequence[float]) -> np.ndarray:
         t = np.asarray(torques, dtype=float)
         if t.shape != (2,) or not _finite(t):
             raise ValueError(f"joint torques {torques!r} must be 2 finite numbers [N m]")
-        self.data.ctrl[self._mot] = t
+        return t
+
+    def observe(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(q, qd, tip_position, thruster_forces) now (new arrays)."""
+        return self.q, self.qd, self.tip_position, self.thruster_forces
+
+    def command(self, thrust: Sequence[float], torques: Sequence[float]) -> None:
+        """:meth:`set_thrust` and :meth:`set_joint_torques` at once (each checked first)."""
+        c, t = self._thrust_ctrl(thrust), self._torque_ctrl(torques)
+        d = self.data
+        if c.size:
+            d.ctrl[self._thr] = c
+        if t.size:
+            d.ctrl[self._mot] = t
+
+    def step_observe(self, n: int = 1):
+        """:meth:`step` (n) and the new state: (q, qd, tip_position, thruster forces or None --
+        None where the forces follow the commands: read :attr:`thruster_forces` after the next
+        :meth:`command`). Native backend: through the compiled sample
+        (:mod:`uvms_mj.physics.plant_io`: the same steps, checks and numbers)."""
+        io = self._plant_io()
+        if io is None:
+            self.step(n)
+            q, qd, tip, thr = self.observe()
+            return q, qd, tip, thr if self._io_layout()[4] is not None else None
+        self._check()
+        self._check_state()  # a state set from outside since the last step: stepped as by step()
+        if self._diverged is None:
+            if io.run(n, self.max_speed) == 0:
+                o = io.out.copy()
+                nq, nv, nt = io.nq, io.nv, io.ntip
+                tip = o[nq + nv:nq + nv + nt] if nt else self.tip_position
+                return o[:nq], o[nq:nq + nv], tip, (o[nq + nv + nt:] if io.nthr else None)
+            mujoco.mj_setState(self.model, self.data, io.snapshot, _SNAPSHOT)  # replay step by step
+        self._step_each(n, None)
+        self._check_state()
+        self._check()
+        q, qd, tip, thr = self.observe()
+        return q, qd, tip, thr if io.nthr else None
+
+    def _plant_io(self):
+        """The compiled sample's arrays for this plant (None: the Python methods run)."""
+        io = self.__dict__.get("_io")
+        if io is not None and io.data is self.data and io.model is self.model:
+            return io
+        if self.__dict__.get("_io_tried") is self.data or self._serving.get(self.data._address) is not None:
+            return None
+        from .physics import plant_io
+
+        self._io_tried = self.data
+        fn = plant_io.library()
+        if fn is None:
+            return None
+        m = self.model
+        if self._snapshot is None:
+            self._snapshot = np.empty(mujoco.mj_stateSize(m, _SNAPSHOT))
+        tip_site, ntip, thr_act, lo, hi = self._io_layout()
+        io = self._io = plant_io.PlantIO(fn, m, self.data, self._scratch, self._snapshot, int(_SNAPSHOT), tip_site,
+                                         ntip, () if thr_act is None else thr_act, () if lo is None else lo,
+                                         () if hi is None else hi)
+        return io
+
+    def _io_layout(self) -> tuple:
+        """(tip_site, ntip, thr_act, lo, hi) of :class:`uvms_mj.physics.plant_io.PlantIO`: the tip's
+        (x, y); the thrust = the lag state clamped to the force range (None: it follows the
+        commands, the plant computes it)."""
+        return self._tip, 2, self._thr_act, self._thr_lo, self._thr_hi
 
     # ---------------------------------------------------------------- stepping
 
@@ -483,7 +556,7 @@ class Plant:
         self._check()
         self._check_state()
         served = self._serving.get(d._address)
-        if served is None and n > 1:
+        if served is None and n > 1 and self._diverged is None:
             snap = self._snapshot
             if snap is None:
                 snap = self._snapshot = np.empty(mujoco.mj_stateSize(m, _SNAPSHOT))

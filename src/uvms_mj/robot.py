@@ -689,21 +689,34 @@ class RobotPlant(Plant):
 
     def set_thrust(self, commands: Sequence[float]) -> None:
         """Command each thruster's thrust [N] (in :attr:`Layout.thruster_names` order)."""
+        u = self._thrust_ctrl(commands)
+        if u.size:
+            self.data.ctrl[self._thr] = u
+
+    def _thrust_ctrl(self, commands: Sequence[float]) -> np.ndarray:
         c = np.asarray(commands, dtype=float).ravel()
         n = len(self._thr)
         if c.shape != (n,) or not _finite(c):
             raise ValueError(f"thruster commands {list(np.ravel(commands))!r} must be {n} finite numbers [N]")
-        if n:
-            self.data.ctrl[self._thr] = self.thrust_to_ctrl(c)
+        return self.thrust_to_ctrl(c) if n else c
 
     def set_joint_torques(self, torques: Sequence[float]) -> None:
         """Command the joint actuators (:attr:`Layout.motor_names` order) [N m]."""
+        t = self._torque_ctrl(torques)
+        if t.size:
+            self.data.ctrl[self._mot] = t
+
+    def _torque_ctrl(self, torques: Sequence[float]) -> np.ndarray:
         t = np.asarray(torques, dtype=float).ravel()
         n = len(self._mot)
         if t.shape != (n,) or not _finite(t):
             raise ValueError(f"joint torques {list(np.ravel(torques))!r} must be {n} finite numbers [N m]")
-        if n:
-            self.data.ctrl[self._mot] = t
+        return t
+
+    def _io_layout(self) -> tuple:
+        # the tip (3 numbers) when there is one; the thrusts through the model's curves, after
+        # the commands (they follow them without a lag state)
+        return max(self._tip, 0), 3 if self._tip >= 0 else 0, None, None, None
 
     def mass_matrix(self) -> np.ndarray:
         """Full nv x nv generalized mass matrix at the current state, added mass included."""

@@ -1,0 +1,78 @@
+"""One control sample of a plant's input and output, compiled (``plant_io.c``).
+
+:meth:`uvms_mj.plant.Plant.step_observe` (n steps, the divergence checks, the new state) runs
+through :func:`library` when it can: the same steps and numbers as its Python code (the
+reference, used with ``UVMS_MJ_KERNEL=off``, without a C compiler or on the Python hydrodynamics
+backend), in one call instead of a dozen numpy and MuJoCo calls. Built like the RAC kernel
+(:mod:`uvms_mj.controllers.kernel`) with :func:`uvms_mj.physics.build.compile_library`.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import threading
+from pathlib import Path
+
+import numpy as np
+
+SOURCE = Path(__file__).resolve().parent / "plant_io.c"
+
+_lock = threading.Lock()
+_lib: ctypes.CDLL | None = None
+_tried = False
+_reason: str | None = None
+
+
+def library():
+    """The compiled ``uvms_plant_step_observe`` (ctypes function), or None (:func:`unavailable_reason`)."""
+    global _lib, _tried, _reason
+    with _lock:
+        if _tried:
+            return _lib
+        _tried = True
+        from ..controllers import kernel
+        from . import build
+
+        if kernel._mode() != "auto":
+            _reason = f"{kernel.ENV_KERNEL}={kernel._mode()}"
+            return None
+        try:
+            lib = ctypes.CDLL(str(build.compile_library("uvms_plant_io", [SOURCE])))
+        except (OSError, build.PluginUnavailableError) as exc:
+            _reason = str(exc)
+            return None
+        fn = lib.uvms_plant_step_observe
+        p, i = ctypes.c_void_p, ctypes.c_int
+        fn.argtypes = [p, p, p, i, p, i, ctypes.c_double, i, i, i, p, p, p, p]
+        fn.restype = ctypes.c_int
+        _lib = fn
+        return fn
+
+
+def unavailable_reason() -> str | None:
+    return _reason
+
+
+class PlantIO:
+    """The arrays of one plant that the compiled sample reads and writes: ``tip_site`` and
+    ``ntip`` (0: no tip readout); ``thr_act``, ``lo``, ``hi``: the thrusters' lag states and
+    force ranges (empty: no thrust readout)."""
+
+    def __init__(self, fn, model, data, scratch, snapshot: np.ndarray, snap_spec: int, tip_site: int, ntip: int,
+                 thr_act=(), lo=(), hi=()) -> None:
+        self.fn, self.model, self.data, self.scratch = fn, model, data, scratch
+        self.thr_act = np.ascontiguousarray(thr_act if len(thr_act) else [0], dtype=np.intc)
+        self.lo = np.ascontiguousarray(lo if len(lo) else [0.0], dtype=float)
+        self.hi = np.ascontiguousarray(hi if len(hi) else [0.0], dtype=float)
+        self.nthr = len(thr_act)
+        self.nq, self.nv, self.ntip = model.nq, model.nv, ntip
+        self.out = np.zeros(self.nq + self.nv + ntip + self.nthr)
+        self.snapshot = snapshot
+        self._head = (model._address, data._address, scratch._address)
+        self._mid = (snapshot.ctypes.data, int(snap_spec))
+        self._tail = (int(tip_site), int(ntip), self.nthr, self.thr_act.ctypes.data, self.lo.ctypes.data,
+                      self.hi.ctypes.data, self.out.ctypes.data)
+
+    def run(self, n: int, max_speed: float) -> int:
+        """n steps and the readout: 0 (the new state in :attr:`out`) or 1 (replay from :attr:`snapshot`)."""
+        return self.fn(*self._head, n, *self._mid, max_speed, *self._tail)
