@@ -83,6 +83,8 @@ class LeanWriter(Writer):
         buf = cb.record_writer._buffer
         pos = buf.tell()
         parts: list[bytes] = []
+        append = parts.append
+        records: dict[int, list] = {}  # channel -> its message index records in this chunk
         for messages, log_time, sequence in samples:
             # the bookkeeping of Writer.add_message (statistics) and ChunkBuilder.add_message
             if st.message_count == 0 or log_time < st.message_start_time:
@@ -97,18 +99,22 @@ class LeanWriter(Writer):
             pub = log_time if publish is None else publish
             for cid, data in messages:
                 counts[cid] += 1
-                index = indices.get(cid)
-                if index is None:
-                    index = indices[cid] = MessageIndex(channel_id=cid, records=[])
-                index.records.append((log_time, pos))
+                recs = records.get(cid)
+                if recs is None:
+                    index = indices.get(cid)
+                    if index is None:
+                        index = indices[cid] = MessageIndex(channel_id=cid, records=[])
+                    recs = records[cid] = index.records
+                recs.append((log_time, pos))
                 cb.num_messages += 1
-                parts.append(pack(_OP_MESSAGE, 22 + len(data), cid, sequence, log_time, pub))
-                parts.append(data)
+                append(pack(_OP_MESSAGE, 22 + len(data), cid, sequence, log_time, pub))
+                append(data)
                 pos += 31 + len(data)  # the record: 9 bytes of opcode and length, 22 of fields, the data
                 if pos > limit:  # as the Writer: the chunk ends after the message that fills it
                     buf.write(b"".join(parts))
-                    parts = []
+                    parts.clear()
                     self._Writer__maybe_finalize_chunk()
+                    records.clear()  # the new chunk has new indexes
                     buf = cb.record_writer._buffer  # a new chunk, starting at this sample's time
                     pos = buf.tell()
                     cb.message_start_time = cb.message_end_time = log_time

@@ -1290,18 +1290,21 @@ class McapRecorder:
         is the same as writing each sample at once."""
         if self.closed:
             raise RuntimeError(f"recorder for {self.path} is closed")
-        with _critical():
-            ns = _ns(t)
+        with _CRITICAL:
+            t = float(t)
+            ns = int(round(t * 1e9))
+            if ns < 0:
+                _ns(t)  # says why
             same = True  # the row has exactly the first row's signals
             if self._known is None:
                 self._start(ns, row)
-            elif len(row) != len(self._known) or not self._known.issuperset(row):
+            elif row.keys() != self._known:
                 same = False
                 for name in row.keys() - self._known - self._warned:
                     self._warned.add(name)
                     warnings.warn(f"recorder: signal {name!r} first appeared after the first "
                                   "sample; it is not recorded", stacklevel=3)
-            self._pending.append((float(t), ns, self.samples, dict(row), same))
+            self._pending.append((t, ns, self.samples, dict(row), same))
             self.samples += 1
             self._last_ns = ns
             if self.samples == 1 or time.monotonic() - self._last_flush >= self.flush_interval:
@@ -1342,11 +1345,11 @@ class McapRecorder:
     def _encode_rows(self, rows: list[tuple]) -> list[list[tuple[int, bytes]]]:
         """Each pending sample's messages (channel, data). The sample channels of rows holding
         the first row's signals, and the paper's /tf and /joint_states, are encoded for the whole
-        batch by one orjson call each (the same bytes as :meth:`_encode_row`, which encodes the
-        others and any row with a non-finite number, see ``tests/test_recorder.py``)."""
+        batch by one orjson call each (the same bytes as :func:`_sample_body` row by row, which
+        encodes the others and any row with a non-finite number, see ``tests/test_recorder.py``)."""
         n = len(rows)
-        stamps = ['{"sec":%d,"nsec":%d}' % divmod(ns, 1_000_000_000) for _, ns, _, _, _ in rows]
-        heads = [('{"timestamp":%s,"t":%r' % (st, r[0])).encode() for st, r in zip(stamps, rows)]
+        stamps = ['{"sec":%d,"nsec":%d}' % (ns // 1_000_000_000, ns % 1_000_000_000) for _, ns, _, _, _ in rows]
+        heads = [b'{"timestamp":%s,"t":%s' % (st.encode(), repr(r[0]).encode()) for st, r in zip(stamps, rows)]
         out: list[list[tuple[int, bytes]]] = [[] for _ in range(n)]
         chans = [(cid, fields, plan) for (cid, fields), plan in zip(self._sample_channels, self._row_plans)]
         batch = [i for i, r in enumerate(rows) if r[4]] if _orjson is not None else []
@@ -1366,7 +1369,7 @@ class McapRecorder:
                         if b"null" in pieces[b * nc + j]:
                             body = _sample_body(rows[i][3], fields)
                             out[i][j] = (cid, heads[i] + (b"," + body[1:] if len(body) > 2 else b"}"))
-        for i in range(n):
+        for i in (range(n) if len(fast) < n else ()):
             if i not in fast:
                 row = rows[i][3]
                 for cid, fields, _ in chans:

@@ -101,7 +101,17 @@ class StraightLine:
 
     def position(self, t: float) -> np.ndarray:
         """Desired tip position p_ed(t) (world, m)."""
-        return self._start + self.distance(t) * self.direction
+        d = self.distance(t)
+        sd = self._start_dir
+        if sd is None:
+            return self._start + d * self.direction
+        (sx, sy), (ux, uy) = sd
+        return np.array([sx + d * ux, sy + d * uy])  # start + d direction, on floats (the same numbers)
+
+    @cached_property
+    def _start_dir(self) -> tuple | None:
+        s, u = self._start.tolist(), self.direction.tolist()
+        return (tuple(s), tuple(u)) if len(s) == len(u) == 2 else None
 
     def cruise_velocity(self) -> np.ndarray:
         """The cruise velocity vector (world, m/s): what Eq. 12 gives the base to follow."""
