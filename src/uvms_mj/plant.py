@@ -495,14 +495,16 @@ class Plant:
             q, qd, tip, thr = self.observe()
             return q, qd, tip, thr if self._io_layout()[4] is not None else None
         self._check()
-        self._check_state()  # a state set from outside since the last step: stepped as by step()
-        if self._diverged is None:
-            if io.run(n, self.max_speed) == 0:
-                o = io.out.copy()
-                nq, nv, nt = io.nq, io.nv, io.ntip
-                tip = o[nq + nv:nq + nv + nt] if nt else self.tip_position
-                return o[:nq], o[nq:nq + nv], tip, (o[nq + nv + nt:] if io.nthr else None)
+        rc = io.run(n, self.max_speed) if self._diverged is None else 2
+        if rc == 0:
+            o = io.out.copy()
+            nq, nv, nt = io.nq, io.nv, io.ntip
+            tip = o[nq + nv:nq + nv + nt] if nt else self.tip_position
+            return o[:nq], o[nq:nq + nv], tip, (o[nq + nv + nt:] if io.nthr else None)
+        if rc == 1:
             mujoco.mj_setState(self.model, self.data, io.snapshot, _SNAPSHOT)  # replay step by step
+        else:  # a state set from outside since the last step: recorded, then stepped as by step()
+            self._check_state()
         self._step_each(n, None)
         self._check_state()
         self._check()

@@ -470,7 +470,7 @@ class RAC(Controller):
         if al is not None and not al._any_equal:  # the Allocator's fast path: u = P_free S tau
             sizes["wls_fast"] = 1
             const["Q"] = al._P_free @ al.S
-        ws = _k.Workspace(lib, sizes, params, index, const)
+        ws = _k.Workspace(lib, sizes, params, index, const, model=r.model, data=r.data)
         a = ws.a
         a["q_prev"][:] = self._q_prev
         a["p_prev"][:] = self._p_prev[0]
@@ -481,7 +481,6 @@ class RAC(Controller):
         a["z"][:] = self.filter.z
         a["z_arm"][:] = self.filter_arm.z
         self.filter.z, self.filter_arm.z = a["z"], a["z_arm"]  # the filters' states now live in the kernel
-        self._m_ptr, self._d_ptr = r.model._address, r.data._address
         return ws
 
     @staticmethod
@@ -502,7 +501,7 @@ class RAC(Controller):
         has_qd = m.qd is not None
         if has_qd:
             a["qd_meas"][:] = m.qd
-        ws.measure(ws.ptr, self._m_ptr, self._d_ptr, first, has_qd)
+        ws.measure(ws.ptr, first, has_qd)
         sc = a["scalars"]
         manip = float(sc[0])
         v_base = self.singular.update(k, manip)  # Eq. 12

@@ -42,8 +42,7 @@ def library():
             _reason = str(exc)
             return None
         fn = lib.uvms_plant_step_observe
-        p, i = ctypes.c_void_p, ctypes.c_int
-        fn.argtypes = [p, p, p, i, p, i, ctypes.c_double, i, i, i, p, p, p, p]
+        fn.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_double]
         fn.restype = ctypes.c_int
         _lib = fn
         return fn
@@ -51,6 +50,15 @@ def library():
 
 def unavailable_reason() -> str | None:
     return _reason
+
+
+class _Struct(ctypes.Structure):
+    """``uvms_plant_io`` of plant_io.c (same fields, same order)."""
+
+    _fields_ = [("m", ctypes.c_void_p), ("d", ctypes.c_void_p), ("scratch", ctypes.c_void_p),
+                ("snap", ctypes.c_void_p), ("snap_spec", ctypes.c_int), ("tip_site", ctypes.c_int),
+                ("ntip", ctypes.c_int), ("nthr", ctypes.c_int), ("thr_act", ctypes.c_void_p), ("lo", ctypes.c_void_p),
+                ("hi", ctypes.c_void_p), ("out", ctypes.c_void_p)]
 
 
 class PlantIO:
@@ -68,11 +76,12 @@ class PlantIO:
         self.nq, self.nv, self.ntip = model.nq, model.nv, ntip
         self.out = np.zeros(self.nq + self.nv + ntip + self.nthr)
         self.snapshot = snapshot
-        self._head = (model._address, data._address, scratch._address)
-        self._mid = (snapshot.ctypes.data, int(snap_spec))
-        self._tail = (int(tip_site), int(ntip), self.nthr, self.thr_act.ctypes.data, self.lo.ctypes.data,
-                      self.hi.ctypes.data, self.out.ctypes.data)
+        self._struct = _Struct(model._address, data._address, scratch._address, snapshot.ctypes.data, int(snap_spec),
+                               int(tip_site), int(ntip), self.nthr, self.thr_act.ctypes.data, self.lo.ctypes.data,
+                               self.hi.ctypes.data, self.out.ctypes.data)
+        self._ptr = ctypes.addressof(self._struct)
 
     def run(self, n: int, max_speed: float) -> int:
-        """n steps and the readout: 0 (the new state in :attr:`out`) or 1 (replay from :attr:`snapshot`)."""
-        return self.fn(*self._head, n, *self._mid, max_speed, *self._tail)
+        """n steps and the readout: 0 (the new state in :attr:`out`), 1 (replay from
+        :attr:`snapshot`) or 2 (the state was bad before: nothing done)."""
+        return self.fn(self._ptr, n, max_speed)

@@ -52,7 +52,8 @@ class _Struct(ctypes.Structure):
     _fields_ = ([(f, ctypes.c_int) for f in _INT_FIELDS]
                 + [(f, ctypes.POINTER(ctypes.c_int)) for f in _INDEX_FIELDS]
                 + [(f, ctypes.c_double) for f in _PARAM_FIELDS]
-                + [(f, ctypes.POINTER(ctypes.c_double)) for f in _CONST_FIELDS + _ARRAY_FIELDS])
+                + [(f, ctypes.POINTER(ctypes.c_double)) for f in _CONST_FIELDS + _ARRAY_FIELDS]
+                + [("m", ctypes.c_void_p), ("d", ctypes.c_void_p)])
 
 
 _lock = threading.Lock()
@@ -95,7 +96,7 @@ def library() -> ctypes.CDLL | None:
                 _reason = f"cannot load the RAC kernel: {exc2 or exc}"
                 return None
         p = ctypes.c_void_p
-        for name, args in (("uvms_rac_measure", [p, p, p, ctypes.c_int, ctypes.c_int]),
+        for name, args in (("uvms_rac_measure", [p, ctypes.c_int, ctypes.c_int]),
                            ("uvms_rac_command", [p, ctypes.c_int]), ("uvms_rac_finish", [p])):
             fn = getattr(lib, name)
             fn.argtypes, fn.restype = args, ctypes.c_int
@@ -111,9 +112,11 @@ def unavailable_reason() -> str | None:
 class Workspace:
     """The arrays of one RAC run that the C code reads and writes (numpy, owned here), and the
     struct holding their addresses. ``sizes``: the ints of ``uvms_rac``; ``params``: its doubles;
-    ``index``: its index arrays; ``const``: its constant arrays (copied)."""
+    ``index``: its index arrays; ``const``: its constant arrays (copied); ``model``, ``data``: the
+    nominal MjModel and MjData the measurement stage evaluates."""
 
-    def __init__(self, lib: ctypes.CDLL, sizes: dict, params: dict, index: dict, const: dict) -> None:
+    def __init__(self, lib: ctypes.CDLL, sizes: dict, params: dict, index: dict, const: dict, model=None,
+                 data=None) -> None:
         nq, nv, nt, nb, na = sizes["nq"], sizes["nv"], sizes["ntask"], sizes["nb"], sizes["na"]
         nthr, nmot = sizes["nthr"], sizes["nmot"]
         if max(nv, nt, na, nb, sizes["nwr"]) > MAXN:
@@ -160,6 +163,9 @@ class Workspace:
                 setattr(s, k, self._keep[-1].ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
             else:
                 setattr(s, k, arr.ctypes.data_as(ctypes.POINTER(ctypes.c_double)))
+        s.m = model._address if model is not None else None
+        s.d = data._address if data is not None else None
+        self._model, self._data = model, data  # kept alive with the struct's pointers
         self.struct = s
         self.ptr = ctypes.addressof(s)
         self.measure = lib.uvms_rac_measure

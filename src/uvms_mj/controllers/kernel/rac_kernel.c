@@ -43,6 +43,9 @@ typedef struct {
   double *qd, *M, *hb, *J, *p, *R, *R_base, *pd_meas, *scalars;  // scalars: manip, det_B, dls, mu2
   double *e_p, *e_v, *v_d, *a_d, *qdd, *u_B, *u_app, *f_e_hat, *f_m_hat, *f_t, *f_tM, *u_M;
   double *body, *thrust, *sat, *torques, *base_quat;
+  // the controller's nominal model and its data
+  const mjModel* m;
+  mjData* d;
 } uvms_rac;
 
 // ------------------------------------------------------------------ small dense algebra
@@ -183,7 +186,9 @@ static void task_diff(const uvms_rac* s, double* out, const double* va, const do
 // ------------------------------------------------------------------ the three stages
 
 // Nominal model at the measured state, task, Jacobian, manipulability. first: k <= k0.
-int uvms_rac_measure(uvms_rac* s, const mjModel* m, mjData* d, int first, int has_qd) {
+int uvms_rac_measure(uvms_rac* s, int first, int has_qd) {
+  const mjModel* m = s->m;
+  mjData* d = s->d;
   int nv = s->nv, nq = s->nq, nt = s->ntask, nbt = s->nbt, ntr = s->ntr, na = s->na;
   if (has_qd) mju_copy(s->qd, s->qd_meas, nv);
   else if (first) mju_zero(s->qd, nv);
