@@ -133,6 +133,50 @@ def test_batched_steps_are_single_steps_and_report_a_divergence_where_it_happene
     assert 0.0 < t < 600 * Plant().model.opt.timestep and round(t / Plant().model.opt.timestep) % 60 != 0
 
 
+@pytest.mark.parametrize("kind", ["paper", "bluerov2_alpha"])
+def test_step_observe_is_step_then_observe(kind):
+    """The compiled sample (physics/plant_io.c) against the Python methods on a twin plant: the
+    same states, tip and thrust readouts bit for bit over 200 samples of changing commands, and
+    a state spoiled from outside reported as step() reports it."""
+    from uvms_mj.physics import plant_io
+    from uvms_mj.robot import InitialState, RobotPlant
+
+    if plant_io.library() is None:
+        pytest.skip(f"no compiled plant sample: {plant_io.unavailable_reason()}")
+
+    def make():
+        if kind == "paper":
+            return Plant()
+        return RobotPlant("bluerov2_alpha", initial=InitialState(position=(0, 0, -1),
+                                                                joints={"alpha_shoulder": 1.9, "alpha_elbow": 1.2}))
+
+    fast, slow = make(), make()
+    slow._io_tried = slow.data  # the Python path
+    assert fast._plant_io() is not None and slow._plant_io() is None
+    nthr, nmot = len(fast._thr), len(fast._mot)
+    rng = np.random.default_rng(1)
+    for k in range(200):
+        thrust, torques = rng.uniform(-5, 5, nthr), rng.uniform(-0.5, 0.5, nmot) * (1 if kind == "paper" else 0.01)
+        fast.command(thrust, torques)
+        slow.set_thrust(thrust)
+        slow.set_joint_torques(torques)
+        a = fast.step_observe(2)
+        slow.step(2)
+        b = slow.observe()
+        for x, y in zip(a[:3], b[:3]):
+            assert np.array_equal(x, y)
+        thr = a[3] if a[3] is not None else fast.thruster_forces
+        assert np.array_equal(thr, b[3])
+    for p in (fast, slow):
+        p.data.qvel[0] = np.nan
+    msgs = []
+    for p, go in ((fast, lambda: fast.step_observe(2)), (slow, lambda: slow.step(2))):
+        with pytest.raises(DivergenceError) as info:
+            go()
+        msgs.append(str(info.value))
+    assert msgs[0] == msgs[1] and "non-finite" in msgs[0]
+
+
 def run_alone(**kw) -> np.ndarray:
     p = Plant(**kw)
     p.set_state(base_velocity=(0.1, 0.0, 0.3))
