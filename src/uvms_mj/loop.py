@@ -95,7 +95,7 @@ def _observe(plant) -> tuple:
 
 def _command(plant, thrust: np.ndarray, torques: np.ndarray) -> None:
     if hasattr(plant, "command"):
-        plant.command(thrust, torques)
+        plant.command(thrust, torques, finite=True)  # checked by the loop
     else:
         plant.set_thrust(thrust)
         plant.set_joint_torques(torques)

@@ -451,10 +451,10 @@ class Plant:
         """
         self.data.ctrl[self._thr] = self._thrust_ctrl(commands)
 
-    def _thrust_ctrl(self, commands: Sequence[float]) -> np.ndarray:
+    def _thrust_ctrl(self, commands: Sequence[float], finite: bool = False) -> np.ndarray:
         """The thrusters' actuator commands for thrusts [N] (checked; the dead zone applied)."""
         c = np.asarray(commands, dtype=float)
-        if c.shape != (3,) or not _finite(c):
+        if c.shape != (3,) or not (finite or _finite(c)):
             raise ValueError(f"thruster commands {commands!r} must be 3 finite numbers [N]")
         if self.dead_zone:
             lo, hi = self.params.dead_zone
@@ -465,9 +465,9 @@ class Plant:
         """Command the two joint torques [N m], held until changed."""
         self.data.ctrl[self._mot] = self._torque_ctrl(torques)
 
-    def _torque_ctrl(self, torques: Sequence[float]) -> np.ndarray:
+    def _torque_ctrl(self, torques: Sequence[float], finite: bool = False) -> np.ndarray:
         t = np.asarray(torques, dtype=float)
-        if t.shape != (2,) or not _finite(t):
+        if t.shape != (2,) or not (finite or _finite(t)):
             raise ValueError(f"joint torques {torques!r} must be 2 finite numbers [N m]")
         return t
 
@@ -475,9 +475,10 @@ class Plant:
         """(q, qd, tip_position, thruster_forces) now (new arrays)."""
         return self.q, self.qd, self.tip_position, self.thruster_forces
 
-    def command(self, thrust: Sequence[float], torques: Sequence[float]) -> None:
-        """:meth:`set_thrust` and :meth:`set_joint_torques` at once (each checked first)."""
-        c, t = self._thrust_ctrl(thrust), self._torque_ctrl(torques)
+    def command(self, thrust: Sequence[float], torques: Sequence[float], *, finite: bool = False) -> None:
+        """:meth:`set_thrust` and :meth:`set_joint_torques` at once (each checked first; with
+        ``finite`` the caller has checked that every value is finite, as the sampled loop does)."""
+        c, t = self._thrust_ctrl(thrust, finite), self._torque_ctrl(torques, finite)
         d = self.data
         if c.size:
             d.ctrl[self._thr] = c
@@ -489,18 +490,21 @@ class Plant:
         None where the forces follow the commands: read :attr:`thruster_forces` after the next
         :meth:`command`). Native backend: through the compiled sample
         (:mod:`uvms_mj.physics.plant_io`: the same steps, checks and numbers)."""
-        io = self._plant_io()
-        if io is None:
-            self.step(n)
-            q, qd, tip, thr = self.observe()
-            return q, qd, tip, thr if self._io_layout()[4] is not None else None
-        self._check()
+        io = self.__dict__.get("_io")
+        if io is None or io.data is not self.data or io.model is not self.model:
+            io = self._plant_io()
+            if io is None:
+                self.step(n)
+                q, qd, tip, thr = self.observe()
+                return q, qd, tip, thr if self._io_layout()[4] is not None else None
+        if self._diverged is not None or _pyb._FAILURES:
+            self._check()
         rc = io.run(n, self.max_speed) if self._diverged is None else 2
         if rc == 0:
             o = io.out.copy()
-            nq, nv, nt = io.nq, io.nv, io.ntip
-            tip = o[nq + nv:nq + nv + nt] if nt else self.tip_position
-            return o[:nq], o[nq:nq + nv], tip, (o[nq + nv + nt:] if io.nthr else None)
+            s = io.slices
+            return o[s[0]], o[s[1]], (o[s[2]] if s[2] is not None else self.tip_position), \
+                (o[s[3]] if s[3] is not None else None)
         if rc == 1:
             mujoco.mj_setState(self.model, self.data, io.snapshot, _SNAPSHOT)  # replay step by step
         else:  # a state set from outside since the last step: recorded, then stepped as by step()

@@ -693,10 +693,10 @@ class RobotPlant(Plant):
         if u.size:
             self.data.ctrl[self._thr] = u
 
-    def _thrust_ctrl(self, commands: Sequence[float]) -> np.ndarray:
+    def _thrust_ctrl(self, commands: Sequence[float], finite: bool = False) -> np.ndarray:
         c = np.asarray(commands, dtype=float).ravel()
         n = len(self._thr)
-        if c.shape != (n,) or not _finite(c):
+        if c.shape != (n,) or not (finite or _finite(c)):
             raise ValueError(f"thruster commands {list(np.ravel(commands))!r} must be {n} finite numbers [N]")
         return self.thrust_to_ctrl(c) if n else c
 
@@ -706,10 +706,10 @@ class RobotPlant(Plant):
         if t.size:
             self.data.ctrl[self._mot] = t
 
-    def _torque_ctrl(self, torques: Sequence[float]) -> np.ndarray:
+    def _torque_ctrl(self, torques: Sequence[float], finite: bool = False) -> np.ndarray:
         t = np.asarray(torques, dtype=float).ravel()
         n = len(self._mot)
-        if t.shape != (n,) or not _finite(t):
+        if t.shape != (n,) or not (finite or _finite(t)):
             raise ValueError(f"joint torques {list(np.ravel(torques))!r} must be {n} finite numbers [N m]")
         return t
 

@@ -367,7 +367,9 @@ class RAC(Controller):
     def _tip_d(self, t: float) -> np.ndarray:
         if self.trajectory is None:
             return self._tip0.copy()
-        p = np.asarray(self.trajectory.position(t), dtype=float).ravel()
+        p = self.trajectory.position(t)
+        if not (type(p) is np.ndarray and p.ndim == 1 and p.dtype == np.float64):
+            p = np.asarray(p, dtype=float).ravel()
         if self.free:
             return p[:3]
         return p[self.tip_rows] if p.size == 3 else p[: self.tip_rows.size]
@@ -506,7 +508,9 @@ class RAC(Controller):
         manip = float(sc[0])
         v_base = self.singular.update(k, manip)  # Eq. 12
         off = self._base_offset[k]
-        self._base_offset[k + 1] = off + T * v_base if any(v_base.tolist()) else off  # off + 0 = off
+        sh = self.singular
+        still = sh.phase == 0 and sh._settled  # v = 0 exactly: off + 0 = off
+        self._base_offset[k + 1] = off if still or not any(v_base.tolist()) else off + T * v_base
         cached = self._pd_next
         p_d = cached[1] if cached is not None and cached[0] == k else self._desired(k)
         p_d_next = self._desired(k + 1)

@@ -75,6 +75,10 @@ class PlantIO:
         self.nthr = len(thr_act)
         self.nq, self.nv, self.ntip = model.nq, model.nv, ntip
         self.out = np.zeros(self.nq + self.nv + ntip + self.nthr)
+        nq, nv = self.nq, self.nv
+        #: where q, qd, the tip and the thrusts are in :attr:`out` (None: not read here)
+        self.slices = (slice(0, nq), slice(nq, nq + nv), slice(nq + nv, nq + nv + ntip) if ntip else None,
+                       slice(nq + nv + ntip, nq + nv + ntip + self.nthr) if self.nthr else None)
         self.snapshot = snapshot
         self._struct = _Struct(model._address, data._address, scratch._address, snapshot.ctypes.data, int(snap_spec),
                                int(tip_site), int(ntip), self.nthr, self.thr_act.ctypes.data, self.lo.ctypes.data,
