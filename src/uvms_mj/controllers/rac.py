@@ -505,7 +505,7 @@ class RAC(Controller):
             a["qd_meas"][:] = m.qd
         ws.measure(ws.ptr, first, has_qd)
         sc = a["scalars"]
-        manip = float(sc[0])
+        manip = sc.item(0)
         v_base = self.singular.update(k, manip)  # Eq. 12
         off = self._base_offset[k]
         sh = self.singular
@@ -534,10 +534,11 @@ class RAC(Controller):
             saturated = a["sat"] != 0.0
         ws.finish(ws.ptr)
         b, sl = ws.block.copy(), ws.slices  # this sample's results (the kernel's buffers are reused)
-        signals = {"e_p": b[sl["e_p"]], "e_v": b[sl["e_v"]], "v_desired": b[sl["v_d"]], "a_desired": b[sl["a_d"]],
-                   "qdd_desired": b[sl["qdd"]], "u_B": b[sl["u_B"]], "u_B_applied": b[sl["u_app"]],
-                   "f_E_hat": b[sl["f_e_hat"]], "manipulability": manip, "singular_phase": self.singular.phase,
-                   "dls_active": bool(sc[2]), "thrust_saturated": saturated}
+        signals = {} if self.free else {"p_desired": p_d[0], "p_measured": b[sl["p"]]}
+        signals.update(e_p=b[sl["e_p"]], e_v=b[sl["e_v"]], v_desired=b[sl["v_d"]], a_desired=b[sl["a_d"]],
+                       qdd_desired=b[sl["qdd"]], u_B=b[sl["u_B"]], u_B_applied=b[sl["u_app"]], f_E_hat=b[sl["f_e_hat"]],
+                       manipulability=manip, singular_phase=sh.phase, dls_active=sc.item(2) != 0.0,
+                       thrust_saturated=saturated)
         if self.observer_arm:
             signals["f_M_hat"] = b[sl["f_m_hat"]]
         if self.free:
@@ -545,7 +546,7 @@ class RAC(Controller):
             signals["tip_desired"] = p_d[0][3:6].copy()
             signals["tip_measured"] = b[sl["p"]][3:6]
         else:
-            signals = {"p_desired": p_d[0], "p_measured": b[sl["p"]], **signals, "det_B": float(sc[1])}
+            signals["det_B"] = sc.item(1)
         return Command(thrust=b[sl["thrust"]], torques=b[sl["torques"]], signals=signals)
 
     def _velocity(self, q: np.ndarray) -> np.ndarray:
