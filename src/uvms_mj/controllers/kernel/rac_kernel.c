@@ -5,7 +5,8 @@
 // commands and signals to round-off). The equation numbers are the paper's (see rac.py and
 // docs/paper-reading.md). Three calls per sample, with Python in between for what stays there:
 //
-//   uvms_rac_measure   nominal model at the measured state (Eqs. 6-7: mj_forward, mj_fullM,
+//   uvms_rac_measure   nominal model at the measured state (Eqs. 6-7: mj_forward's position and
+//                      velocity stages, mj_fullM,
 //                      qfrc_bias - qfrc_passive), Jacobians (mj_jacBody, mj_jacSite), the task
 //                      p and J, the measured task velocity, the arm's manipulability;
 //   (Python)           Eq. 12 (SingularHandler) and the desired points p_d(k), p_d(k+1);
@@ -197,7 +198,8 @@ int uvms_rac_measure(uvms_rac* s, int first, int has_qd) {
   mju_copy(d->qpos, s->q, nq);
   mju_copy(d->qvel, s->qd, nv);
   d->time = 0.0;
-  mj_forward(m, d);
+  mj_fwdPosition(m, d);  // mj_forward's position and velocity stages: all that M, h and the
+  mj_fwdVelocity(m, d);  // Jacobians need (the passive stage runs the hydrodynamics plugins)
   mj_fullM(m, d, s->M);
   for (int i = 0; i < nv; i++) s->hb[i] = d->qfrc_bias[i] - d->qfrc_passive[i];
   // Jacobians (world rows) of the vehicle origin and the tip
