@@ -1334,13 +1334,15 @@ class McapRecorder:
             w.add_samples([(out, ns, k) for (_, ns, k, _, _), out in zip(rows, encoded)])
             return
         start = 0
-        for n, ((t, ns, k, row, _), out) in enumerate(zip(rows, encoded)):
-            self._add_path_points(t, row)
-            if t - self._path_sent_t >= self.path_period - 1e-9:  # the paths follow this sample's messages
-                w.add_samples([(o, r[1], r[2]) for r, o in zip(rows[start:n + 1], encoded[start:n + 1])])
+        period = self.path_period - 1e-9
+        for n, r in enumerate(rows):
+            if r[0] - self._path_sent_t >= period:  # the paths follow this sample's messages
+                self._add_path_rows(rows, start, n + 1)
+                w.add_samples([(o, x[1], x[2]) for x, o in zip(rows[start:n + 1], encoded[start:n + 1])])
                 start = n + 1
-                self._write_paths(ns, k)
-        w.add_samples([(o, r[1], r[2]) for r, o in zip(rows[start:], encoded[start:])])
+                self._write_paths(r[1], r[2])
+        self._add_path_rows(rows, start, len(rows))
+        w.add_samples([(o, x[1], x[2]) for x, o in zip(rows[start:], encoded[start:])])
 
     def _encode_rows(self, rows: list[tuple]) -> list[list[tuple[int, bytes]]]:
         """Each pending sample's messages (channel, data). The sample channels of rows holding
@@ -1427,24 +1429,34 @@ class McapRecorder:
                 out[i].append((tf_id, (tf_pos % tf_args([stamp] + xs)).encode()))
             out[i].append((js_id, (js_tmpl % ((stamp,) + js_args(xs))).encode()))
 
-    def _add_path_points(self, t: float, row: Mapping[str, Any]) -> None:
-        """A point every ``path_resolution`` s of run time (the first finite value from then on);
-        the rows between are only kept: the last finite value among them ends the strip when it
-        is sent (:meth:`_settle_paths`)."""
+    def _add_path_rows(self, rows: list[tuple], lo: int, hi: int) -> None:
+        """The paths' points from the pending rows ``rows[lo:hi]``, in order: a point every
+        ``path_resolution`` s of run time (the first finite value from then on); the rows between
+        are only kept (found by their times, kept in one step): the last finite value among them
+        ends the strip when it is sent (:meth:`_settle_paths`)."""
         res = self.path_resolution - 1e-9
         for spec in self._path_specs:
             key = spec.key
-            if t - self._path_kept_t.get(key, -math.inf) < res:
-                self._path_recent.setdefault(key, []).append(row)
-                continue
-            xs = self._path_value(spec, row)
-            if xs is None:
-                continue
-            self._paths.setdefault(key, []).append(_point(*xs))
-            self._path_kept_t[key] = t
-            self._path_last[key] = None
-            self._path_recent[key] = []
-            self._path_dirty = True
+            kept_t = self._path_kept_t.get(key, -math.inf)
+            recent = self._path_recent.setdefault(key, [])
+            j = lo
+            while j < hi:
+                if rows[j][0] - kept_t < res:
+                    j2 = j + 1
+                    while j2 < hi and rows[j2][0] - kept_t < res:
+                        j2 += 1
+                    recent.extend(r[3] for r in rows[j:j2])
+                    j = j2
+                    continue
+                t, row = rows[j][0], rows[j][3]
+                xs = self._path_value(spec, row)
+                if xs is not None:
+                    self._paths.setdefault(key, []).append(_point(*xs))
+                    kept_t = self._path_kept_t[key] = t
+                    self._path_last[key] = None
+                    recent = self._path_recent[key] = []
+                    self._path_dirty = True
+                j += 1
 
     @staticmethod
     def _path_value(spec: "_PathSpec", row: Mapping[str, Any]) -> list | None:
