@@ -246,11 +246,10 @@ def run_closed_loop(
             else:
                 plant.data.act[plant._thr_act] = np.clip(thrust, plant._thr_lo, plant._thr_hi)
         times.append(k * T)
-        row = dict(cmd.signals)
-        row.update(
-            q_true=q_true, qd_true=qd_true, tip_true=tip_true, q_measured=meas.q, thrust_command=thrust,
-            thrust_force=thr_lagged if thr_lagged is not None and k > 0 else plant.thruster_forces, torques=torques,
-        )
+        row = {**cmd.signals, "q_true": q_true, "qd_true": qd_true, "tip_true": tip_true, "q_measured": meas.q,
+               "thrust_command": thrust,
+               "thrust_force": thr_lagged if thr_lagged is not None and k > 0 else plant.thruster_forces,
+               "torques": torques}
         rows.append(row)
         if sink is not None:
             sink(k * T, row)
