@@ -27,6 +27,7 @@ from __future__ import annotations
 import math
 import threading
 from dataclasses import dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import Any, Mapping, Sequence
 
@@ -480,24 +481,22 @@ class Plant:
         ``finite`` the caller has checked that every value is finite, as the sampled loop does)."""
         c, t = self._thrust_ctrl(thrust, finite), self._torque_ctrl(torques, finite)
         ctrl = self.data.ctrl
-        thr, mot = self._ctrl_slices()
+        thr, mot = self._ctrl_slices
         if c.size:
             ctrl[thr] = c
         if t.size:
             ctrl[mot] = t
 
+    @cached_property
     def _ctrl_slices(self) -> tuple:
         """The thrusters' and motors' actuator indices, as slices where they are consecutive
         (a slice assignment costs less than a fancy one)."""
-        got = self.__dict__.get("_slices")
-        if got is None:
-            def as_slice(idx):
-                idx = [int(i) for i in np.ravel(idx)]
-                if idx and idx == list(range(idx[0], idx[0] + len(idx))):
-                    return slice(idx[0], idx[0] + len(idx))
-                return np.asarray(idx, dtype=int)
-            got = self._slices = (as_slice(self._thr), as_slice(self._mot))
-        return got
+        def as_slice(idx):
+            idx = [int(i) for i in np.ravel(idx)]
+            if idx and idx == list(range(idx[0], idx[0] + len(idx))):
+                return slice(idx[0], idx[0] + len(idx))
+            return np.asarray(idx, dtype=int)
+        return as_slice(self._thr), as_slice(self._mot)
 
     def step_observe(self, n: int = 1):
         """:meth:`step` (n) and the new state: (q, qd, tip_position, thruster forces or None --

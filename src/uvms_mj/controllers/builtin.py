@@ -84,6 +84,11 @@ class SingularHandler:
         self.v = np.zeros(size)
         self._settled = False  # the current ramp has reached its end (v no longer changes)
 
+    @property
+    def at_rest(self) -> bool:
+        """Normal phase with its ramp over: the base's desired velocity is exactly 0."""
+        return self.phase == 0 and self._settled
+
     def update(self, k: int, detb: float) -> np.ndarray:
         """Base desired linear velocity (world, m/s) for the interval [k, k+1)."""
         a = abs(detb)

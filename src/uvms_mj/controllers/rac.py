@@ -509,8 +509,7 @@ class RAC(Controller):
         v_base = self.singular.update(k, manip)  # Eq. 12
         off = self._base_offset[k]
         sh = self.singular
-        still = sh.phase == 0 and sh._settled  # v = 0 exactly: off + 0 = off
-        self._base_offset[k + 1] = off if still or not any(v_base.tolist()) else off + T * v_base
+        self._base_offset[k + 1] = off if sh.at_rest or not any(v_base.tolist()) else off + T * v_base  # off + 0
         cached = self._pd_next
         p_d = cached[1] if cached is not None and cached[0] == k else self._desired(k)
         p_d_next = self._desired(k + 1)

@@ -204,6 +204,42 @@ def register_plugins() -> bool:
         return True
 
 
+# --------------------------------------------------------------------------- compiled fast paths
+
+#: The switch of the compiled fast paths that are not MuJoCo plugins (the RAC kernel,
+#: :mod:`uvms_mj.controllers.kernel`; the plant's sample, :mod:`uvms_mj.physics.plant_io`):
+#: ``auto`` (default) builds and uses them, ``off`` keeps their Python code.
+ENV_KERNEL = "UVMS_MJ_KERNEL"
+KERNEL_MODES = ("auto", "off")
+
+
+def kernel_mode() -> str:
+    """``$UVMS_MJ_KERNEL``, lower-case (default "auto")."""
+    return os.environ.get(ENV_KERNEL, "").strip().lower() or "auto"
+
+
+def load_compiled(stem: str, srcs: list[Path], what: str):
+    """Compile (into the cache, if needed) and load with ctypes one of the compiled fast paths:
+    (the ``ctypes.CDLL``, None) or (None, the one-line reason: ``UVMS_MJ_KERNEL=off`` or a bad
+    value, no compiler, a failed build). A damaged cache file is rebuilt once."""
+    import ctypes
+
+    mode = kernel_mode()
+    if mode not in KERNEL_MODES:
+        return None, f"{ENV_KERNEL}={os.environ.get(ENV_KERNEL)!r} is not one of {', '.join(KERNEL_MODES)}"
+    if mode == "off":
+        return None, f"disabled by {ENV_KERNEL}=off"
+    try:
+        return ctypes.CDLL(str(compile_library(stem, srcs))), None
+    except PluginUnavailableError as exc:
+        return None, str(exc)
+    except OSError as exc:
+        try:
+            return ctypes.CDLL(str(compile_library(stem, srcs, force=True))), None
+        except (OSError, PluginUnavailableError) as exc2:
+            return None, f"cannot load {what}: {exc2 or exc}"
+
+
 def unavailable_reason() -> str | None:
     """Why :func:`register_plugins` returned False (None if not tried or registered)."""
     return _reason

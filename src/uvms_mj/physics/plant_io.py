@@ -3,8 +3,8 @@
 :meth:`uvms_mj.plant.Plant.step_observe` (n steps, the divergence checks, the new state) runs
 through :func:`library` when it can: the same steps and numbers as its Python code (the
 reference, used with ``UVMS_MJ_KERNEL=off``, without a C compiler or on the Python hydrodynamics
-backend), in one call instead of a dozen numpy and MuJoCo calls. Built like the RAC kernel
-(:mod:`uvms_mj.controllers.kernel`) with :func:`uvms_mj.physics.build.compile_library`.
+backend), in one call instead of a dozen numpy and MuJoCo calls. Built and loaded like the RAC
+kernel (:mod:`uvms_mj.controllers.kernel`), by :func:`uvms_mj.physics.build.load_compiled`.
 """
 
 from __future__ import annotations
@@ -30,16 +30,10 @@ def library():
         if _tried:
             return _lib
         _tried = True
-        from ..controllers import kernel
         from . import build
 
-        if kernel._mode() != "auto":
-            _reason = f"{kernel.ENV_KERNEL}={kernel._mode()}"
-            return None
-        try:
-            lib = ctypes.CDLL(str(build.compile_library("uvms_plant_io", [SOURCE])))
-        except (OSError, build.PluginUnavailableError) as exc:
-            _reason = str(exc)
+        lib, _reason = build.load_compiled("uvms_plant_io", [SOURCE], "the compiled plant sample")
+        if lib is None:
             return None
         fn = lib.uvms_plant_step_observe
         fn.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_double]
@@ -49,6 +43,7 @@ def library():
 
 
 def unavailable_reason() -> str | None:
+    """Why :func:`library` returned None (None if it was not tried or is loaded)."""
     return _reason
 
 

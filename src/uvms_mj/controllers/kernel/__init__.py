@@ -15,14 +15,14 @@ Python callback), the Python code runs too. :func:`unavailable_reason` says why 
 from __future__ import annotations
 
 import ctypes
-import os
 import threading
 from pathlib import Path
 
 import numpy as np
 
-ENV_KERNEL = "UVMS_MJ_KERNEL"
-KERNEL_MODES = ("auto", "off")
+from ...physics import build
+
+ENV_KERNEL, KERNEL_MODES = build.ENV_KERNEL, build.KERNEL_MODES
 #: The largest dof, task, arm and thruster-row count the C code's fixed buffers take.
 MAXN = 32
 SOURCE = Path(__file__).resolve().parent / "rac_kernel.c"
@@ -62,10 +62,6 @@ _reason: str | None = None
 _tried = False
 
 
-def _mode() -> str:
-    return os.environ.get(ENV_KERNEL, "").strip().lower() or "auto"
-
-
 def library() -> ctypes.CDLL | None:
     """The compiled kernel (built into the cache if needed), or None (:func:`unavailable_reason`
     says why). Once per process; thread-safe."""
@@ -74,27 +70,9 @@ def library() -> ctypes.CDLL | None:
         if _tried:
             return _lib
         _tried = True
-        mode = _mode()
-        if mode not in KERNEL_MODES:
-            _reason = f"{ENV_KERNEL}={os.environ.get(ENV_KERNEL)!r} is not one of {', '.join(KERNEL_MODES)}"
+        lib, _reason = build.load_compiled("uvms_rac_kernel", [SOURCE], "the RAC kernel")
+        if lib is None:
             return None
-        if mode == "off":
-            _reason = f"disabled by {ENV_KERNEL}=off"
-            return None
-        from ...physics import build
-
-        try:
-            path = build.compile_library("uvms_rac_kernel", [SOURCE])
-            lib = ctypes.CDLL(str(path))
-        except build.PluginUnavailableError as exc:
-            _reason = str(exc)
-            return None
-        except OSError as exc:  # a damaged cache file: rebuild once
-            try:
-                lib = ctypes.CDLL(str(build.compile_library("uvms_rac_kernel", [SOURCE], force=True)))
-            except (OSError, build.PluginUnavailableError) as exc2:
-                _reason = f"cannot load the RAC kernel: {exc2 or exc}"
-                return None
         p = ctypes.c_void_p
         for name, args in (("uvms_rac_measure", [p, ctypes.c_int, ctypes.c_int]),
                            ("uvms_rac_command", [p, ctypes.c_int]), ("uvms_rac_finish", [p])):
