@@ -160,3 +160,38 @@ def test_eq12_handler_carries_and_releases_in_2d_and_3d(size):
         assert h.phase == want[k][0]
         assert np.array_equal(v, want[k][1]), k
     assert h.phase == 0 and not np.any(h.v)
+
+
+def test_desired_tip_blocks_are_the_per_sample_path():
+    """RAC reads the paper line's desired tips in blocks (StraightLine.positions, over several
+    blocks of TIP_BLOCK samples in 40 s): the run is the same, bit for bit, as with a trajectory
+    offering only position(t) (evaluated sample by sample)."""
+    from uvms_mj.controllers.rac import TIP_BLOCK
+
+    class PerSample:  # the same line without positions()
+        def __init__(self, line):
+            self.line = line
+
+        def position(self, t):
+            return self.line.position(t)
+
+        def cruise_velocity(self):
+            return self.line.cruise_velocity()
+
+    sc = load_scenario(SCEN / "paper.yaml", [])
+    runs = []
+    for wrap in (False, True):
+        plant, ctrl = build(sc)
+        assert hasattr(ctrl.trajectory, "positions")
+        if wrap:
+            ctrl.trajectory = PerSample(ctrl.trajectory)
+        runs.append(run_closed_loop(plant, ctrl, sc.duration, T=ctrl.T, sensor=sensor_model(sc), seed=sc.seed,
+                                    warm_start=sc.warm_start))
+        if wrap:
+            assert ctrl._tip_blk is None
+        else:
+            assert ctrl._tip_blk[0] >= 3 * TIP_BLOCK  # the last block read: several before it
+    a, b = runs
+    assert list(a.signals) == list(b.signals)
+    for k in a.signals:
+        np.testing.assert_array_equal(a.signals[k], b.signals[k], err_msg=k)

@@ -654,7 +654,9 @@ def test_legacy_joint_states_log_reads_back(recorded, tmp_path):
 
 
 def _writer_bytes(cls, compression, batched=False, **kw):
-    """A file of 600 messages on 2 channels with flushes, chunks of ~2 KB."""
+    """A file of 600 messages on 2 channels with flushes, chunks of ~2 KB: by add_message
+    (``batched`` False; None: publish time = log time), add_sample (True) or add_samples of up
+    to 61 samples ("samples", publish time = log time)."""
     import io
 
     buf = io.BytesIO()
@@ -662,16 +664,24 @@ def _writer_bytes(cls, compression, batched=False, **kw):
     w.start("", "test")
     sid = w.register_schema("s", "jsonschema", b"{}")
     c1, c2 = w.register_channel("/a", "json", sid), w.register_channel("/b", "json", sid)
+    pending = []
     for i in range(300):
         msgs = [(c1 if i % 3 else c2, b'{"i":%d}' % i * (i % 5 + 1)), (c2, b"[%d]" % i)]
         t = (i * 7919) % 1000 * 10  # not monotonic: the start/end times are min/max
-        if batched:
+        if batched == "samples":  # publish time = log time
+            pending.append((msgs, t, i))
+            if i % 61 == 60 or i % 97 == 0:  # batches spanning several chunks
+                w.add_samples(pending)
+                pending = []
+        elif batched:
             w.add_sample(msgs, t, i, t + 1)
         else:
             for cid, data in msgs:
-                w.add_message(cid, t, data, t + 1, i)
+                w.add_message(cid, t, data, t if batched is None else t + 1, i)
         if i % 97 == 0:
             w.flush()
+    if pending:
+        w.add_samples(pending)
     w.finish()
     return buf.getvalue()
 
@@ -699,6 +709,10 @@ def test_lean_writer_writes_what_mcaps_writer_writes(compression):
     stock = _writer_bytes(Writer, comp)
     lean = _writer_bytes(LeanWriter, comp)
     assert _writer_bytes(LeanWriter, comp, batched=True) == lean
+    # add_samples (many samples, several chunks at once) against add_message one at a time
+    assert _writer_bytes(LeanWriter, comp, batched="samples") == _writer_bytes(LeanWriter, comp, batched=None)
+    if compression != "ZSTD":
+        assert _writer_bytes(LeanWriter, comp, batched="samples") == _writer_bytes(Writer, comp, batched=None)
     if compression != "ZSTD":
         assert lean == stock
         return

@@ -104,6 +104,28 @@ def test_line3d_in_the_plane_equals_straight_line(kw: dict) -> None:
     np.testing.assert_allclose(line.profile[0] * line.direction[:2], ref.cruise_velocity(), rtol=0, atol=1e-12)
 
 
+@pytest.mark.parametrize(
+    "kw",
+    [
+        dict(start=(0.1, -0.3), target=(0.4, -0.3)),
+        dict(start=(0.0, 0.0), target=(-0.7, 1.3), cruise_speed=0.2, accel=0.05, t_start=0.0),
+        dict(start=(1.0, 2.0), target=(1.01, 2.02), cruise_speed=0.5, accel=0.1, t_start=2.0),  # triangular
+        dict(start=(0.5, 0.5), target=(0.5, 0.5)),  # zero length
+    ],
+)
+def test_straight_line_positions_are_position_bit_for_bit(kw: dict) -> None:
+    """The block evaluation a sampled controller reads (StraightLine.positions) gives position(t)
+    at each time exactly (compared as bit patterns, so -0.0 and 0.0 differ): at the samples of
+    60 Hz, before the start, on every phase boundary and after the end."""
+    ref = StraightLine(**kw)
+    _, tr, tc = ref._profile()
+    t = np.r_[np.arange(-30, 1200) / 60.0, ref.t_start, ref.t_start + tr, ref.t_start + tr + tc, ref.duration, 1e9]
+    got = ref.positions(t)
+    want = np.array([ref.position(float(x)) for x in t])
+    assert got.shape == want.shape == (t.size, 2)
+    np.testing.assert_array_equal(got.view(np.int64), want.view(np.int64))
+
+
 def test_line3d_trapezoid_closed_form() -> None:
     line = Line3D(start=(0, 0, 0), target=(0, 0, 2.0), cruise_speed=0.5, accel=0.25, t_start=1.0)
     v, tr, tc = line.profile

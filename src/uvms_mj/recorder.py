@@ -1243,6 +1243,12 @@ class McapRecorder:
                 '{"name":%s,"position":%%s,"velocity":%%s}' % json.dumps(n).replace("%", "%%") for n in JOINT_NAMES) + "]}"
             self._js_tmpl_pos = '{"timestamp":%s,"joints":[' + ",".join(
                 '{"name":%s,"position":%%s}' % json.dumps(n).replace("%", "%%") for n in JOINT_NAMES) + "]}"
+            # as bytes, with the columns of [stamp, *numbers of _encode_frames] each one takes
+            self._tf_pos_b = self._tf_pos.encode()
+            self._tf_cols = list(self._tf_args(list(range(19))))
+            self._js_tmpl_b, self._js_tmpl_pos_b = self._js_tmpl.encode(), self._js_tmpl_pos.encode()
+            self._js_cols = [0] + [1 + j for q in range(5) for j in (8 + q, 13 + q)]
+            self._js_cols_pos = [0] + [1 + j for j in range(8, 13)]
         if self.params is not None:
             self._writer.add_message(self._channel(TOPIC_SCENE, "foxglove.SceneUpdate",
                                                    SCHEMAS["foxglove.SceneUpdate"]),
@@ -1350,8 +1356,8 @@ class McapRecorder:
         batch by one orjson call each (the same bytes as :func:`_sample_body` row by row, which
         encodes the others and any row with a non-finite number, see ``tests/test_recorder.py``)."""
         n = len(rows)
-        stamps = ['{"sec":%d,"nsec":%d}' % (ns // 1_000_000_000, ns % 1_000_000_000) for _, ns, _, _, _ in rows]
-        heads = [b'{"timestamp":%s,"t":%s' % (st.encode(), repr(r[0]).encode()) for st, r in zip(stamps, rows)]
+        stamps = [b'{"sec":%d,"nsec":%d}' % divmod(ns, 1_000_000_000) for _, ns, _, _, _ in rows]
+        heads = [b'{"timestamp":%s,"t":%a' % (st, r[0]) for st, r in zip(stamps, rows)]  # (%a: a float's repr)
         out: list[list[tuple[int, bytes]]] = [[] for _ in range(n)]
         chans = [(cid, fields, plan) for (cid, fields), plan in zip(self._sample_channels, self._row_plans)]
         batch = [i for i, r in enumerate(rows) if r[4]] if _orjson is not None else []
@@ -1381,10 +1387,10 @@ class McapRecorder:
             self._encode_paper_frames(rows, stamps, out)
         if self._robot is not None:
             for i, (_, _, _, row, _) in enumerate(rows):
-                self._robot.write(out[i], stamps[i], heads[i].decode(), row)
+                self._robot.write(out[i], stamps[i].decode(), heads[i].decode(), row)
         return out
 
-    def _encode_paper_frames(self, rows: list[tuple], stamps: list[str], out: list[list]) -> None:
+    def _encode_paper_frames(self, rows: list[tuple], stamps: list[bytes], out: list[list]) -> None:
         """The paper robot's /tf and /joint_states messages of a batch: the numbers of every row
         at once (numpy's sin and cos of the half angles, one orjson call), then one template each.
         A row without a finite pose gets no /tf (as for any robot), its joint states the general
@@ -1400,7 +1406,7 @@ class McapRecorder:
             if group:
                 self._encode_frames(rows, stamps, out, group, vel)
 
-    def _encode_frames(self, rows: list[tuple], stamps: list[str], out: list[list], group: list[int],
+    def _encode_frames(self, rows: list[tuple], stamps: list[bytes], out: list[list], group: list[int],
                        vel: bool) -> None:
         Q = np.array([np.asarray(rows[i][3]["q_true"], dtype=float) for i in group])
         M = np.empty((len(group), 18 if vel else 13))
@@ -1412,22 +1418,38 @@ class McapRecorder:
         M[:, 8:13] = Q
         if vel:
             M[:, 13:18] = np.array([np.asarray(rows[i][3]["qd_true"], dtype=float) for i in group])
-        text = _orjson.dumps(M, option=_NUMPY).decode() if _orjson is not None else ""
-        parts = text[2:-2].split("],[") if text else []
+        text = _orjson.dumps(M, option=_NUMPY) if _orjson is not None else b""
+        tf_id, js_id = self._channels[TOPIC_TF], self._channels[TOPIC_JOINTS]
+        n, w = M.shape
+        nums = text[2:-2].replace(b"],[", b",").split(b",") if text else []
+        if len(nums) == n * w and ok.all() and b"null" not in text:
+            # every row at once: each channel's template repeated for the batch (rows separated by
+            # NUL bytes, which JSON text never holds raw) and formatted in one operation with
+            # the stamps and numbers of all rows, picked by an object array
+            A = np.empty((n, 1 + w), dtype=object)
+            A[:, 0] = [stamps[i] for i in group]
+            A[:, 1:] = np.array(nums, dtype=object).reshape(n, w)
+            js_tmpl, js_cols = (self._js_tmpl_b, self._js_cols) if vel else (self._js_tmpl_pos_b, self._js_cols_pos)
+            tf = ((self._tf_pos_b + b"\0") * n % tuple(A[:, self._tf_cols].ravel().tolist())).split(b"\0")
+            js = ((js_tmpl + b"\0") * n % tuple(A[:, js_cols].ravel().tolist())).split(b"\0")
+            for i, tf_i, js_i in zip(group, tf, js):
+                out[i].append((tf_id, tf_i))
+                out[i].append((js_id, js_i))
+            return
+        tf_pos, tf_args = self._tf_pos_b, self._tf_args
+        js_tmpl = self._js_tmpl_b if vel else self._js_tmpl_pos_b
+        js_args = operator.itemgetter(*[c - 1 for c in (self._js_cols if vel else self._js_cols_pos)[1:]])
+        parts = text[2:-2].split(b"],[") if text else []
         if len(parts) != len(group):
             parts = [None] * len(group)
-        tf_id, js_id = self._channels[TOPIC_TF], self._channels[TOPIC_JOINTS]
-        tf_pos, tf_args = self._tf_pos, self._tf_args
-        js_tmpl = self._js_tmpl if vel else self._js_tmpl_pos
-        js_args = operator.itemgetter(*([j for q in range(5) for j in (8 + q, 13 + q)] if vel else range(8, 13)))
         for b, (part, i) in enumerate(zip(parts, group)):
-            if part is None or "null" in part:
-                part = _enc(M[b].tolist())[1:-1]  # non-finite numbers: the general encoding
-            xs = part.split(",")
+            if part is None or b"null" in part:
+                part = _enc(M[b].tolist())[1:-1].encode()  # non-finite numbers: the general encoding
+            xs = part.split(b",")
             stamp = stamps[i]
             if ok[b]:
-                out[i].append((tf_id, (tf_pos % tf_args([stamp] + xs)).encode()))
-            out[i].append((js_id, (js_tmpl % ((stamp,) + js_args(xs))).encode()))
+                out[i].append((tf_id, tf_pos % tf_args([stamp] + xs)))
+            out[i].append((js_id, js_tmpl % ((stamp,) + js_args(xs))))
 
     def _add_path_rows(self, rows: list[tuple], lo: int, hi: int) -> None:
         """The paths' points from the pending rows ``rows[lo:hi]``, in order: a point every

@@ -53,6 +53,9 @@ from .base import Command, Controller, ControllerError, Measurement, check_posit
 from .builtin import PAPER_JS, PAPER_T, PAPER_TF, LowPassZOH, SingularHandler, check_rac_settings
 from ..rotations import mat_to_quat, quat_to_mat, rotation_log
 
+#: Samples of desired tip positions evaluated at once (:meth:`RAC._tip_k`).
+TIP_BLOCK = 600
+
 #: Default gains per task block (the paper's Gamma = Lambda = diag(0.3, 0.3, 0.2, 0.2, 0.2) on
 #: its planar task: 0.3 for the base position, 0.2 for the base rotation and the tip).
 GAIN_BASE_POSITION, GAIN_BASE_ROTATION, GAIN_TIP = 0.3, 0.2, 0.2
@@ -156,7 +159,9 @@ class RAC(Controller):
         trajectory: desired tip path: any object with ``position(t)`` (world [m]; a
             :class:`uvms_mj.trajectory.StraightLine` or any :class:`uvms_mj.trajectories.Trajectory`),
             ``velocity(t)`` if it has no ``cruise_velocity()``; ``orientation(t)`` with
-            ``tip_orientation``. None: hold the initial tip position.
+            ``tip_orientation``. None: hold the initial tip position. Optional
+            ``positions(ts)``: ``position`` at each time of an array, the same numbers bit for bit
+            (read in blocks of ``TIP_BLOCK`` samples; StraightLine has it).
         robot: the controller's :class:`NominalRobot` (floating robots; given by the scenario).
         nominal: for the paper's robot, a planar :class:`uvms_mj.nominal.NominalModel` whose
             parameters make the nominal MuJoCo model (default: the model file's).
@@ -350,7 +355,7 @@ class RAC(Controller):
         """p_d(k): base reference plus the Eq. 12 offset, and the tip path."""
         t = k * self.T
         off = self._base_offset[k]
-        tip = self._tip_d(t)
+        tip = self._tip_k(k)
         cache = self._base_d
         if cache is None or cache[0] is not off:  # the base's desired part: new only when the offset is
             if self.free:
@@ -363,6 +368,21 @@ class RAC(Controller):
         if self.free:
             return vec, [self._ref_R] + ([self._tip_R_d(t)] if self.tip_orientation else [])
         return vec, []
+
+    def _tip_k(self, k: int) -> np.ndarray:
+        """The desired tip at sample k (:meth:`_tip_d` at t = k T): read from blocks of
+        ``TIP_BLOCK`` samples where the trajectory has ``positions(ts)`` (position at each time,
+        the same numbers bit for bit, e.g. :meth:`uvms_mj.trajectory.StraightLine.positions`)."""
+        blk = self._tip_blk
+        if blk is not None and 0 <= k - blk[0] < len(blk[1]):
+            return blk[1][k - blk[0]]
+        positions = getattr(self.trajectory, "positions", None)
+        if positions is None:
+            return self._tip_d(k * self.T)
+        P = np.asarray(positions(np.arange(k, k + TIP_BLOCK) * self.T), dtype=float)  # (float(k) T, as k * T)
+        P = P[:, :3] if self.free else (P[:, self.tip_rows] if P.shape[1] == 3 else P[:, :self.tip_rows.size])
+        self._tip_blk = (k, P)
+        return P[0]
 
     def _tip_d(self, t: float) -> np.ndarray:
         if self.trajectory is None:
@@ -421,6 +441,7 @@ class RAC(Controller):
                                         size=3 if self.free else self.lin.size)
         self._base_offset = {m.k: np.zeros(3 if self.free else self.lin.size)}
         self._base_d = None  # (offset, base part of p_d) of the last _desired
+        self._tip_blk = None  # (first sample, desired tips) of _tip_k
         self._k0 = m.k
         self._pd_prev = self._desired(m.k)
         self._pd_next = None
@@ -473,6 +494,9 @@ class RAC(Controller):
             sizes["wls_fast"] = 1
             const["Q"] = al._P_free @ al.S
         ws = _k.Workspace(lib, sizes, params, index, const, model=r.model, data=r.data)
+        sig = {"e_p": "e_p", "e_v": "e_v", "v_desired": "v_d", "a_desired": "a_d", "qdd_desired": "qdd", "u_B": "u_B",
+               "u_B_applied": "u_app", "f_E_hat": "f_e_hat"}  # signal: kernel output, in the signals' order
+        self._signal_views = (tuple(sig), tuple(ws.slices[v] for v in sig.values()))
         a = ws.a
         a["q_prev"][:] = self._q_prev
         a["p_prev"][:] = self._p_prev[0]
@@ -534,9 +558,9 @@ class RAC(Controller):
         ws.finish(ws.ptr)
         b, sl = ws.block.copy(), ws.slices  # this sample's results (the kernel's buffers are reused)
         signals = {} if self.free else {"p_desired": p_d[0], "p_measured": b[sl["p"]]}
-        signals.update(e_p=b[sl["e_p"]], e_v=b[sl["e_v"]], v_desired=b[sl["v_d"]], a_desired=b[sl["a_d"]],
-                       qdd_desired=b[sl["qdd"]], u_B=b[sl["u_B"]], u_B_applied=b[sl["u_app"]], f_E_hat=b[sl["f_e_hat"]],
-                       manipulability=manip, singular_phase=sh.phase, dls_active=sc.item(2) != 0.0,
+        names, views = self._signal_views
+        signals.update(zip(names, map(b.__getitem__, views)))  # e_p ... f_E_hat, views of this sample's block
+        signals.update(manipulability=manip, singular_phase=sh.phase, dls_active=sc.item(2) != 0.0,
                        thrust_saturated=saturated)
         if self.observer_arm:
             signals["f_M_hat"] = b[sl["f_m_hat"]]
