@@ -736,15 +736,27 @@ def test_lean_writer_writes_what_mcaps_writer_writes(compression):
     assert got == want
 
 
-def _irregular_rows(n: int = 200) -> list:
+def _irregular_rows(n: int = 200, layout: str = "2-D") -> list:
     """Rows with every kind the recorder takes (floats, ints, bools, bool and 2-D arrays, float32),
-    and, here and there, a non-finite number, a missing signal and a late one."""
+    and, here and there, a non-finite number, a missing signal and a late one. ``layout``:
+    "2-D" (a 2-D signal, state signals last), "loop" (no 2-D signal, the state signals between
+    others as the loop's rows have them; numpy scalars; every 29th row in another order) or
+    "state first"."""
     rows = []
     for k in range(n):
         r = synthetic_row(k)
-        r["gain"] = np.array([[1.0, 2.0], [3.0, 0.1 * k]])
+        if layout == "2-D":
+            r["gain"] = np.array([[1.0, 2.0], [3.0, 0.1 * k]])
         r["f32"] = np.array([0.1, 0.2 * k], dtype=np.float32)
         r["count"] = np.int64(k)
+        if layout == "loop":
+            state = {name: r.pop(name) for name in ("q_true", "qd_true", "tip_true")}
+            ctrl = {name: r.pop(name) for name in ("f32", "count")}
+            r = {**r, **state, **ctrl, "scalar": np.float64(0.5 * k), "flag": np.bool_(k % 3 == 0)}
+            if k % 29 == 3:
+                r = dict(reversed(r.items()))
+        elif layout == "state first":
+            r = {name: r[name] for name in ("q_true", "qd_true", "tip_true")} | r
         if k % 37 == 5:
             r["det_B"] = math.inf if k % 2 else math.nan
         if k % 41 == 7:
@@ -759,16 +771,18 @@ def _irregular_rows(n: int = 200) -> list:
     return rows
 
 
-def test_batched_encoding_is_the_per_sample_encoding(tmp_path, params):
+@pytest.mark.parametrize("layout", ["2-D", "loop", "state first"])
+def test_batched_encoding_is_the_per_sample_encoding(tmp_path, params, layout):
     """The recorder encodes the samples since its last flush at once; flushing after every sample
     (batches of one) or once per 200 samples gives the same messages, for regular rows and for
-    every irregular one (non-finite numbers, missing and late signals)."""
+    every irregular one (non-finite numbers, missing and late signals, another order), whatever
+    the place of the state signals in the row and with numpy scalars."""
     logs = {}
     for label, interval in (("each", 0.0), ("batch", 1e9)):
         path = tmp_path / f"{label}.mcap"
         with pytest.warns(UserWarning, match="first appeared after the first sample"):
             with McapRecorder(path, params, {}, flush_interval=interval) as rec:
-                for t, r in _irregular_rows():
+                for t, r in _irregular_rows(layout=layout):
                     rec.write_sample(t, r)
                 rec.close()
         logs[label] = [(c.topic, m.log_time, m.sequence, m.data) for c, _, m in iter_messages(path)]

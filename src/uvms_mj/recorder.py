@@ -637,12 +637,13 @@ def _special(v: Any, is_bool: bool) -> Any:
     return np.ravel(v)
 
 
-def _batch_bodies(rows: list, plans: list) -> list[bytes] | None:
+def _batch_bodies(rows: list, plans: list) -> tuple[list[bytes], bool] | None:
     """The sample-channel bodies of rows holding the first row's signals, without their braces,
     row by row then channel by channel (what :func:`_sample_body` gives each, from one orjson
     call): per channel either the row without the other signals (``drop``) or its few fields
-    picked; ``special`` fields converted (booleans to 0/1, 2-D arrays flattened). None where the
-    batch cannot be encoded at once (a value orjson cannot take)."""
+    picked; ``special`` fields converted (booleans to 0/1, 2-D arrays flattened). With them,
+    whether any body holds a ``null`` (a non-finite number). None where the batch cannot be
+    encoded at once (a value orjson cannot take)."""
     bodies = []
     for row in rows:
         for drop, special in plans:
@@ -660,9 +661,13 @@ def _batch_bodies(rows: list, plans: list) -> list[bytes] | None:
         text = _orjson.dumps(bodies, option=_NUMPY)
     except TypeError:
         return None
-    parts = text[2:-2].split(b"},{")
+    parts = text.split(b"},{")
     # no body holds an object (values are numbers and arrays): one "{" per body
-    return parts if len(parts) == len(bodies) and text.count(b"{") == len(bodies) else None
+    if len(parts) != len(bodies) or text.count(b"{") != len(bodies):
+        return None
+    parts[0] = parts[0][2:]  # the list's "[{" and "}]"
+    parts[-1] = parts[-1][:-2]
+    return parts, text.find(b"null") >= 0
 
 
 def _sample_body(row: Mapping[str, Any], fields: list[tuple[str, bool, bool]]) -> bytes:
@@ -1361,7 +1366,8 @@ class McapRecorder:
         out: list[list[tuple[int, bytes]]] = [[] for _ in range(n)]
         chans = [(cid, fields, plan) for (cid, fields), plan in zip(self._sample_channels, self._row_plans)]
         batch = [i for i, r in enumerate(rows) if r[4]] if _orjson is not None else []
-        pieces = _batch_bodies([rows[i][3] for i in batch], [c[2] for c in chans]) if batch and chans else None
+        got = _batch_bodies([rows[i][3] for i in batch], [c[2] for c in chans]) if batch and chans else None
+        pieces, nulls = got if got is not None else (None, False)
         if pieces is None:
             batch = []
         fast = set(batch)
@@ -1371,7 +1377,7 @@ class McapRecorder:
             datas = [b"%s,%s}" % (heads[i], piece) for i, piece in zip((i for i in batch for _ in cids), pieces)]
             for b, i in enumerate(batch):
                 out[i] = list(zip(cids, datas[b * nc:(b + 1) * nc]))
-            if any(b"null" in p for p in pieces):  # a non-finite number: the general encoding
+            if nulls:  # a non-finite number: the general encoding
                 for b, i in enumerate(batch):
                     for j, (cid, fields, _) in enumerate(chans):
                         if b"null" in pieces[b * nc + j]:

@@ -494,10 +494,13 @@ class RAC(Controller):
             sizes["wls_fast"] = 1
             const["Q"] = al._P_free @ al.S
         ws = _k.Workspace(lib, sizes, params, index, const, model=r.model, data=r.data)
-        sig = {"e_p": "e_p", "e_v": "e_v", "v_desired": "v_d", "a_desired": "a_d", "qdd_desired": "qdd", "u_B": "u_B",
-               "u_B_applied": "u_app", "f_E_hat": "f_e_hat"}  # signal: kernel output, in the signals' order
+        sig = {} if self.free else {"p_measured": "p"}  # signal: kernel output, in the signals' order
+        sig.update(e_p="e_p", e_v="e_v", v_desired="v_d", a_desired="a_d", qdd_desired="qdd", u_B="u_B",
+                   u_B_applied="u_app", f_E_hat="f_e_hat")
         self._signal_views = (tuple(sig), tuple(ws.slices[v] for v in sig.values()))
+        self._cmd_views = (ws.slices["thrust"], ws.slices["torques"])
         a = ws.a
+        self._ws_views = (a["q"], a["qd_meas"], a["scalars"], a["pd"], a["pdn"], a["sat"])
         a["q_prev"][:] = self._q_prev
         a["p_prev"][:] = self._p_prev[0]
         a["R_prev"][:] = self._rots(self._p_prev[1])
@@ -520,27 +523,28 @@ class RAC(Controller):
     def _compute_kernel(self, m: Measurement) -> Command:
         """One sample through the compiled kernel: the steps of :meth:`compute`'s Python code
         (see rac_kernel.c), Eq. 12, the desired points and a "wls" allocation staying here."""
-        ws, T, k = self._ws, self.T, m.k
-        a = ws.a
+        ws, k = self._ws, m.k
+        a_q, a_qd, sc, a_pd, a_pdn, a_sat = self._ws_views
         first = k <= self._k0
-        a["q"][:] = m.q
+        a_q[:] = m.q
         has_qd = m.qd is not None
         if has_qd:
-            a["qd_meas"][:] = m.qd
+            a_qd[:] = m.qd
         ws.measure(ws.ptr, first, has_qd)
-        sc = a["scalars"]
         manip = sc.item(0)
-        v_base = self.singular.update(k, manip)  # Eq. 12
-        off = self._base_offset[k]
         sh = self.singular
-        self._base_offset[k + 1] = off if sh.at_rest or not any(v_base.tolist()) else off + T * v_base  # off + 0
+        v_base = sh.update(k, manip)  # Eq. 12
+        offsets = self._base_offset
+        off = offsets[k]
+        offsets[k + 1] = off if sh.at_rest or not any(v_base.tolist()) else off + self.T * v_base  # off + 0
         cached = self._pd_next
         p_d = cached[1] if cached is not None and cached[0] == k else self._desired(k)
         p_d_next = self._desired(k + 1)
         self._pd_next = (k + 1, p_d_next)
-        a["pd"][:] = p_d[0]
-        a["pdn"][:] = p_d_next[0]
+        a_pd[:] = p_d[0]
+        a_pdn[:] = p_d_next[0]
         if self.free:
+            a = ws.a
             a["Rd"][:9] = p_d[1][0].ravel()
             a["Rdn"][:9] = p_d_next[1][0].ravel()
             if self.tip_orientation:
@@ -550,18 +554,23 @@ class RAC(Controller):
         if rc < 0:
             raise np.linalg.LinAlgError("Singular matrix")
         if rc == 1:  # "wls": the Allocator
+            a = ws.a
             res = self.allocator(a["body"][self.wrench_rows])
             a["thrust"][:] = res.thrust
             saturated = np.asarray(res.saturated, dtype=bool)
         else:
-            saturated = a["sat"] != 0.0
+            saturated = a_sat != 0.0
         ws.finish(ws.ptr)
-        b, sl = ws.block.copy(), ws.slices  # this sample's results (the kernel's buffers are reused)
-        signals = {} if self.free else {"p_desired": p_d[0], "p_measured": b[sl["p"]]}
+        b = ws.block.copy()  # this sample's results (the kernel's buffers are reused)
         names, views = self._signal_views
-        signals.update(zip(names, map(b.__getitem__, views)))  # e_p ... f_E_hat, views of this sample's block
+        if self.free:
+            signals = dict(zip(names, map(b.__getitem__, views)))  # e_p ... f_E_hat: views of the block
+        else:
+            signals = {"p_desired": p_d[0]}
+            signals.update(zip(names, map(b.__getitem__, views)))  # p_measured ... f_E_hat
         signals.update(manipulability=manip, singular_phase=sh.phase, dls_active=sc.item(2) != 0.0,
                        thrust_saturated=saturated)
+        sl = ws.slices
         if self.observer_arm:
             signals["f_M_hat"] = b[sl["f_m_hat"]]
         if self.free:
@@ -570,7 +579,8 @@ class RAC(Controller):
             signals["tip_measured"] = b[sl["p"]][3:6]
         else:
             signals["det_B"] = sc.item(1)
-        return Command(thrust=b[sl["thrust"]], torques=b[sl["torques"]], signals=signals)
+        thr, tor = self._cmd_views
+        return Command(b[thr], b[tor], signals)
 
     def _velocity(self, q: np.ndarray) -> np.ndarray:
         """Backward difference of the measured coordinates as qvel (quaternions included)."""
