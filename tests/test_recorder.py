@@ -794,6 +794,34 @@ def test_batched_encoding_is_the_per_sample_encoding(tmp_path, params, layout):
     assert "late" not in back.signals
 
 
+def test_regular_batches_are_the_per_sample_encoding(tmp_path, params, monkeypatch):
+    """A batch of regular rows (the first row's signals, all finite) is put together at once
+    (sample channels, /tf and /joint_states by zips): the same messages as one sample at a time,
+    and that path is the one taken."""
+    taken = []
+    orig = McapRecorder._every_row_at_once
+
+    def spy(self, *a):
+        out = orig(self, *a)
+        taken.append(out is not None and len(out))
+        return out
+
+    monkeypatch.setattr(McapRecorder, "_every_row_at_once", spy)
+    logs = {}
+    for label, interval in (("each", 0.0), ("batch", 1e9)):
+        path = tmp_path / f"{label}.mcap"
+        with McapRecorder(path, params, {}, flush_interval=interval) as rec:
+            for k in range(300):
+                r = synthetic_row(k)
+                r = {**{n: r.pop(n) for n in ("q_true", "qd_true", "tip_true")}, **r, "count": np.int64(k)}
+                rec.write_sample(k / 60, r)
+            rec.close()
+        logs[label] = [(c.topic, m.log_time, m.sequence, m.data) for c, _, m in iter_messages(path)]
+    assert max(taken) == 299  # the batch after the first sample (flushed at once) went that way
+    assert len(logs["each"]) > 4 * 300
+    assert logs["each"] == logs["batch"]
+
+
 def test_rows_are_copied_until_their_batch_is_written(tmp_path, params):
     """The recorder keeps a copy of each row until the next flush: a caller that reuses one dict
     for every sample still gets every sample."""

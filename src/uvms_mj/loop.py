@@ -216,6 +216,7 @@ def run_closed_loop(
         return Measurement(k=k, t=k * T, q=q, qd=qd)
 
     on_event = getattr(plant, "on_sample", None)  # scheduled plant events (e.g. a payload pick-up)
+    exact = layout is None and not (noisy or quantized or sensor.velocity_sensor or sensor.delay)  # q = q_true
     # the state at each sample: observed once, then read by each step (Plant.step_observe: the
     # compiled sample where it can); the thrust read after the commands where it follows them
     state = _observe(plant)
@@ -223,7 +224,7 @@ def run_closed_loop(
         if on_event is not None:
             on_event(k * T)
         q_true, qd_true, tip_true, thr_lagged = state
-        meas = measure(k, q_true, qd_true)
+        meas = Measurement(k, k * T, q_true.copy()) if exact else measure(k, q_true, qd_true)
         if k == 0:
             controller.reset(meas)
         cmd: Command = controller.compute(meas)

@@ -479,7 +479,11 @@ class Plant:
     def command(self, thrust: Sequence[float], torques: Sequence[float], *, finite: bool = False) -> None:
         """:meth:`set_thrust` and :meth:`set_joint_torques` at once (each checked first; with
         ``finite`` the caller has checked that every value is finite, as the sampled loop does)."""
-        c, t = self._thrust_ctrl(thrust, finite), self._torque_ctrl(torques, finite)
+        if finite and not self.dead_zone and type(thrust) is type(torques) is np.ndarray \
+                and thrust.shape == (3,) and torques.shape == (2,) and thrust.dtype == torques.dtype == np.float64:
+            c, t = thrust, torques  # what _thrust_ctrl and _torque_ctrl give them
+        else:
+            c, t = self._thrust_ctrl(thrust, finite), self._torque_ctrl(torques, finite)
         ctrl = self.data.ctrl
         thr, mot = self._ctrl_slices
         if c.size:

@@ -146,6 +146,7 @@ import threading
 import time
 import warnings
 from contextlib import contextmanager
+from itertools import repeat
 from dataclasses import dataclass
 from importlib import metadata as _importlib_metadata
 from pathlib import Path
@@ -1375,6 +1376,10 @@ class McapRecorder:
         cids = [c[0] for c in chans]
         if batch:
             datas = [b"%s,%s}" % (heads[i], piece) for i, piece in zip((i for i in batch for _ in cids), pieces)]
+            if len(batch) == n and not nulls and self._robot is None:
+                every = self._every_row_at_once(rows, stamps, cids, datas)
+                if every is not None:
+                    return every
             for b, i in enumerate(batch):
                 out[i] = list(zip(cids, datas[b * nc:(b + 1) * nc]))
             if nulls:  # a non-finite number: the general encoding
@@ -1396,6 +1401,28 @@ class McapRecorder:
                 self._robot.write(out[i], stamps[i].decode(), heads[i].decode(), row)
         return out
 
+    def _every_row_at_once(self, rows: list[tuple], stamps: list[bytes], cids: list[int],
+                           datas: list[bytes]) -> list[tuple] | None:
+        """:meth:`_encode_rows` of a batch of regular rows (the first row's signals, all finite,
+        the paper's pose and velocities in each): the sample channels' messages ``datas`` (row by
+        row, channel by channel) and the /tf and /joint_states messages put together by zips.
+        None where the rows are not all like that."""
+        nc = len(cids)
+        cols = [zip(repeat(cid), datas[j::nc]) for j, cid in enumerate(cids)]
+        if self._has_q:
+            try:
+                Q = np.array([r[3]["q_true"] for r in rows], dtype=float)
+                Qd = np.array([r[3]["qd_true"] for r in rows], dtype=float)
+            except (KeyError, ValueError, TypeError):
+                return None
+            if Q.shape != (len(rows), 5) or Qd.shape != Q.shape:
+                return None
+            both = self._frames_at_once(*self._frame_numbers(Q, Qd), stamps, True)
+            if both is None:
+                return None
+            cols += [zip(repeat(self._channels[TOPIC_TF]), both[0]), zip(repeat(self._channels[TOPIC_JOINTS]), both[1])]
+        return list(zip(*cols))
+
     def _encode_paper_frames(self, rows: list[tuple], stamps: list[bytes], out: list[list]) -> None:
         """The paper robot's /tf and /joint_states messages of a batch: the numbers of every row
         at once (numpy's sin and cos of the half angles, one orjson call), then one template each.
@@ -1412,33 +1439,48 @@ class McapRecorder:
             if group:
                 self._encode_frames(rows, stamps, out, group, vel)
 
-    def _encode_frames(self, rows: list[tuple], stamps: list[bytes], out: list[list], group: list[int],
-                       vel: bool) -> None:
-        Q = np.array([np.asarray(rows[i][3]["q_true"], dtype=float) for i in group])
-        M = np.empty((len(group), 18 if vel else 13))
+    def _frame_numbers(self, Q: np.ndarray, Qd: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, bytes]:
+        """The numbers of the paper's /tf and /joint_states messages for poses ``Q`` (n, 5) and
+        velocities ``Qd`` (n, 5; None: positions only): (the matrix of them, which rows have a
+        finite pose, their orjson text)."""
+        M = np.empty((len(Q), 18 if Qd is not None else 13))
         M[:, 0:2] = Q[:, :2]
         H = 0.5 * Q[:, 2:5]
         ok = np.isfinite(M[:, 0:2]).all(axis=1) & np.isfinite(H).all(axis=1)
         H[~ok] = 0.0
         M[:, 2:8:2], M[:, 3:8:2] = np.sin(H), np.cos(H)  # (z_i, w_i) of each rotation about +Z
         M[:, 8:13] = Q
-        if vel:
-            M[:, 13:18] = np.array([np.asarray(rows[i][3]["qd_true"], dtype=float) for i in group])
-        text = _orjson.dumps(M, option=_NUMPY) if _orjson is not None else b""
-        tf_id, js_id = self._channels[TOPIC_TF], self._channels[TOPIC_JOINTS]
+        if Qd is not None:
+            M[:, 13:18] = Qd
+        return M, ok, (_orjson.dumps(M, option=_NUMPY) if _orjson is not None else b"")
+
+    def _frames_at_once(self, M: np.ndarray, ok: np.ndarray, text: bytes, stamps: list[bytes],
+                        vel: bool) -> tuple[list[bytes], list[bytes]] | None:
+        """The /tf and /joint_states messages of rows whose numbers are all finite, at once:
+        each channel's template repeated for the batch (rows separated by NUL bytes, which JSON
+        text never holds raw) and formatted in one operation with the stamps and numbers of all
+        rows, picked by an object array. None where a row is not like that."""
         n, w = M.shape
         nums = text[2:-2].replace(b"],[", b",").split(b",") if text else []
-        if len(nums) == n * w and ok.all() and b"null" not in text:
-            # every row at once: each channel's template repeated for the batch (rows separated by
-            # NUL bytes, which JSON text never holds raw) and formatted in one operation with
-            # the stamps and numbers of all rows, picked by an object array
-            A = np.empty((n, 1 + w), dtype=object)
-            A[:, 0] = [stamps[i] for i in group]
-            A[:, 1:] = np.array(nums, dtype=object).reshape(n, w)
-            js_tmpl, js_cols = (self._js_tmpl_b, self._js_cols) if vel else (self._js_tmpl_pos_b, self._js_cols_pos)
-            tf = ((self._tf_pos_b + b"\0") * n % tuple(A[:, self._tf_cols].ravel().tolist())).split(b"\0")
-            js = ((js_tmpl + b"\0") * n % tuple(A[:, js_cols].ravel().tolist())).split(b"\0")
-            for i, tf_i, js_i in zip(group, tf, js):
+        if len(nums) != n * w or not ok.all() or b"null" in text:
+            return None
+        A = np.empty((n, 1 + w), dtype=object)
+        A[:, 0] = stamps
+        A[:, 1:] = np.array(nums, dtype=object).reshape(n, w)
+        js_tmpl, js_cols = (self._js_tmpl_b, self._js_cols) if vel else (self._js_tmpl_pos_b, self._js_cols_pos)
+        tf = ((self._tf_pos_b + b"\0") * n % tuple(A[:, self._tf_cols].ravel().tolist())).split(b"\0")
+        js = ((js_tmpl + b"\0") * n % tuple(A[:, js_cols].ravel().tolist())).split(b"\0")
+        return tf[:n], js[:n]
+
+    def _encode_frames(self, rows: list[tuple], stamps: list[bytes], out: list[list], group: list[int],
+                       vel: bool) -> None:
+        Q = np.array([np.asarray(rows[i][3]["q_true"], dtype=float) for i in group])
+        Qd = np.array([np.asarray(rows[i][3]["qd_true"], dtype=float) for i in group]) if vel else None
+        M, ok, text = self._frame_numbers(Q, Qd)
+        tf_id, js_id = self._channels[TOPIC_TF], self._channels[TOPIC_JOINTS]
+        both = self._frames_at_once(M, ok, text, [stamps[i] for i in group], vel)
+        if both is not None:
+            for i, tf_i, js_i in zip(group, *both):
                 out[i].append((tf_id, tf_i))
                 out[i].append((js_id, js_i))
             return
