@@ -476,7 +476,7 @@ class RAC(Controller):
                  "clip_alloc": int(self.allocator is None), "alloc_input": int(self.observer_input == "allocated"),
                  "nthr": self.B.shape[1], "nwr": self.wrench_rows.size, "nmot": self._motor_idx.size,
                  "base_body": lay.base_body, "tip_site": lay.tip_site, "base_qadr": lay.base_qadr if self.free else 0,
-                 "wls_fast": 0}
+                 "wls_fast": 0, "nbv": self._ref_pos.size, "nlin": self.lin.size}
         if max(m.nv, self.ntask, na, nb) > _k.MAXN:
             return None
         params = {"T": self.T, "dls_threshold": self.dls_threshold, "dls_damping": self.dls_damping,
@@ -484,7 +484,7 @@ class RAC(Controller):
                   "g_arm": self.g_arm, "h_arm": self.filter_arm.h}
         index = {"base_dofs": self.base_dofs, "arm_dofs": self.arm_dofs, "tip_rows": self.tip_rows,
                  "base_qpos": getattr(self, "base_qpos", ()), "arm_qadr": self.arm_qadr,
-                 "wrench_rows": self.wrench_rows, "motor_idx": self._motor_idx}
+                 "wrench_rows": self.wrench_rows, "motor_idx": self._motor_idx, "lin": self.lin}
         const = {"gamma": self.gamma, "lam": self.lam, "q_rest": self.q_rest, "B": self.B, "B_pinv": self.B_pinv,
                  "lo": self.lo, "hi": self.hi, "motor_lo": r.motor_lo, "motor_hi": r.motor_hi}
         if not self.free:
@@ -494,13 +494,16 @@ class RAC(Controller):
             sizes["wls_fast"] = 1
             const["Q"] = al._P_free @ al.S
         ws = _k.Workspace(lib, sizes, params, index, const, model=r.model, data=r.data)
-        sig = {} if self.free else {"p_measured": "p"}  # signal: kernel output, in the signals' order
+        sig = {} if self.free else {"p_desired": "pd_out", "p_measured": "p"}  # signal: kernel output, in order
         sig.update(e_p="e_p", e_v="e_v", v_desired="v_d", a_desired="a_d", qdd_desired="qdd", u_B="u_B",
                    u_B_applied="u_app", f_E_hat="f_e_hat")
         self._signal_views = (tuple(sig), tuple(ws.slices[v] for v in sig.values()))
         self._cmd_views = (ws.slices["thrust"], ws.slices["torques"])
         a = ws.a
-        self._ws_views = (a["q"], a["qd_meas"], a["scalars"], a["pd"], a["pdn"], a["sat"])
+        self._ws_views = (a["q"], a["qd_meas"], a["scalars"], a["v_base"], a["tipn"], a["sat"])
+        a["ref"][:] = self._ref_pos  # the desired points' base part: reference + Eq. 12 offset (0 now)
+        a["pd"][:] = self._pd_prev[0]  # p_d(k0) (the kernel's own from then on)
+        a["Rd"][:] = a["Rdn"][:] = self._rots(self._pd_prev[1])
         a["q_prev"][:] = self._q_prev
         a["p_prev"][:] = self._p_prev[0]
         a["R_prev"][:] = self._rots(self._p_prev[1])
@@ -522,9 +525,9 @@ class RAC(Controller):
 
     def _compute_kernel(self, m: Measurement) -> Command:
         """One sample through the compiled kernel: the steps of :meth:`compute`'s Python code
-        (see rac_kernel.c), Eq. 12, the desired points and a "wls" allocation staying here."""
+        (see rac_kernel.c); Eq. 12's handler, the desired tip and a "wls" allocation staying here."""
         ws, k = self._ws, m.k
-        a_q, a_qd, sc, a_pd, a_pdn, a_sat = self._ws_views
+        a_q, a_qd, sc, a_v, a_tipn, a_sat = self._ws_views
         first = k <= self._k0
         a_q[:] = m.q
         has_qd = m.qd is not None
@@ -534,23 +537,13 @@ class RAC(Controller):
         manip = sc.item(0)
         sh = self.singular
         v_base = sh.update(k, manip)  # Eq. 12
-        offsets = self._base_offset
-        off = offsets[k]
-        offsets[k + 1] = off if sh.at_rest or not any(v_base.tolist()) else off + self.T * v_base  # off + 0
-        cached = self._pd_next
-        p_d = cached[1] if cached is not None and cached[0] == k else self._desired(k)
-        p_d_next = self._desired(k + 1)
-        self._pd_next = (k + 1, p_d_next)
-        a_pd[:] = p_d[0]
-        a_pdn[:] = p_d_next[0]
-        if self.free:
-            a = ws.a
-            a["Rd"][:9] = p_d[1][0].ravel()
-            a["Rdn"][:9] = p_d_next[1][0].ravel()
-            if self.tip_orientation:
-                a["Rd"][9:] = p_d[1][1].ravel()
-                a["Rdn"][9:] = p_d_next[1][1].ravel()
-        rc = ws.command(ws.ptr, first)
+        moving = not sh.at_rest and any(v_base.tolist())  # the offset moves: off(k+1) = off(k) + T v
+        if moving:
+            a_v[:] = v_base
+        a_tipn[:] = self._tip_k(k + 1)  # p_d(k + 1): the kernel adds the base part (_desired)
+        if self.tip_orientation:
+            ws.a["Rdn"][9:] = self._tip_R_d((k + 1) * self.T).ravel()
+        rc = ws.command(ws.ptr, first, moving)
         if rc < 0:
             raise np.linalg.LinAlgError("Singular matrix")
         if rc == 1:  # "wls": the Allocator
@@ -563,19 +556,16 @@ class RAC(Controller):
         ws.finish(ws.ptr)
         b = ws.block.copy()  # this sample's results (the kernel's buffers are reused)
         names, views = self._signal_views
-        if self.free:
-            signals = dict(zip(names, map(b.__getitem__, views)))  # e_p ... f_E_hat: views of the block
-        else:
-            signals = {"p_desired": p_d[0]}
-            signals.update(zip(names, map(b.__getitem__, views)))  # p_measured ... f_E_hat
+        signals = dict(zip(names, map(b.__getitem__, views)))  # [p_desired, p_measured,] e_p ... f_E_hat
         signals.update(manipulability=manip, singular_phase=sh.phase, dls_active=sc.item(2) != 0.0,
                        thrust_saturated=saturated)
         sl = ws.slices
         if self.observer_arm:
             signals["f_M_hat"] = b[sl["f_m_hat"]]
         if self.free:
-            signals["base_desired"] = np.concatenate((p_d[0][:3], b[sl["base_quat"]]))
-            signals["tip_desired"] = p_d[0][3:6].copy()
+            p_d = b[sl["pd_out"]]
+            signals["base_desired"] = np.concatenate((p_d[:3], b[sl["base_quat"]]))
+            signals["tip_desired"] = p_d[3:6]
             signals["tip_measured"] = b[sl["p"]][3:6]
         else:
             signals["det_B"] = sc.item(1)

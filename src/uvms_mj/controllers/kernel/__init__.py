@@ -29,21 +29,21 @@ SOURCE = Path(__file__).resolve().parent / "rac_kernel.c"
 
 _INT_FIELDS = ("nq", "nv", "nb", "na", "ntask", "nbt", "ntr", "nvec", "free_base", "tip_orient", "square",
                "observer", "observer_arm", "clip_alloc", "alloc_input", "nthr", "nwr", "nmot", "base_body",
-               "tip_site", "base_qadr", "wls_fast")
-_INDEX_FIELDS = ("base_dofs", "arm_dofs", "tip_rows", "base_qpos", "arm_qadr", "wrench_rows", "motor_idx")
+               "tip_site", "base_qadr", "wls_fast", "nbv", "nlin")
+_INDEX_FIELDS = ("base_dofs", "arm_dofs", "tip_rows", "base_qpos", "arm_qadr", "wrench_rows", "motor_idx", "lin")
 _PARAM_FIELDS = ("T", "dls_threshold", "dls_damping", "null_kp", "null_kd", "g", "h", "g_arm", "h_arm")
 _CONST_FIELDS = ("gamma", "lam", "q_rest", "Jb", "Jb_pinvT", "B", "B_pinv", "lo", "hi", "motor_lo", "motor_hi", "Q")
 _ARRAY_FIELDS = ("q", "qd_meas", "pd", "Rd", "pdn", "Rdn",
                  "q_prev", "p_prev", "R_prev", "J_prev", "e_p_prev", "pd_prev", "Rd_prev", "z", "z_arm",
                  "qd", "M", "hb", "J", "p", "R", "R_base", "pd_meas", "scalars",
                  "e_p", "e_v", "v_d", "a_d", "qdd", "u_B", "u_app", "f_e_hat", "f_m_hat", "f_t", "f_tM", "u_M",
-                 "body", "thrust", "sat", "torques", "base_quat")
+                 "body", "thrust", "sat", "torques", "base_quat", "ref", "off", "v_base", "tipn", "pd_out")
 
 
 #: The results :meth:`uvms_mj.controllers.rac.RAC.compute` returns as signals or commands
 #: (:attr:`Workspace.block`).
 OUTPUTS = ("p", "e_p", "e_v", "v_d", "a_d", "qdd", "u_B", "u_app", "f_e_hat", "f_m_hat", "thrust", "sat",
-           "torques", "base_quat")
+           "torques", "base_quat", "pd_out")
 
 
 class _Struct(ctypes.Structure):
@@ -75,7 +75,7 @@ def library() -> ctypes.CDLL | None:
             return None
         p = ctypes.c_void_p
         for name, args in (("uvms_rac_measure", [p, ctypes.c_int, ctypes.c_int]),
-                           ("uvms_rac_command", [p, ctypes.c_int]), ("uvms_rac_finish", [p])):
+                           ("uvms_rac_command", [p, ctypes.c_int, ctypes.c_int]), ("uvms_rac_finish", [p])):
             fn = getattr(lib, name)
             fn.argtypes, fn.restype = args, ctypes.c_int
         _lib = lib
@@ -106,7 +106,9 @@ class Workspace:
                   "qd": nv, "M": (nv, nv), "hb": nv, "J": (nt, nv), "p": nvec, "R": 18, "R_base": (3, 3),
                   "pd_meas": nt, "scalars": 4, "e_p": nt, "e_v": nt, "v_d": nt, "a_d": nt, "qdd": nv, "u_B": nb,
                   "u_app": nb, "f_e_hat": nb, "f_m_hat": na, "f_t": nb, "f_tM": na, "u_M": na, "body": 6,
-                  "thrust": nthr, "sat": nthr, "torques": nmot, "base_quat": 4}
+                  "thrust": nthr, "sat": nthr, "torques": nmot, "base_quat": 4,
+                  "ref": sizes["nbv"], "off": sizes["nlin"], "v_base": sizes["nlin"], "tipn": nvec - sizes["nbv"],
+                  "pd_out": nvec}
         self.lib = lib
         self.a: dict[str, np.ndarray] = {k: np.zeros(v) for k, v in shapes.items() if k not in OUTPUTS}
         # the per-sample results that become signals: views of one block, copied once per sample

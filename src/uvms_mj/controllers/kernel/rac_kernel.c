@@ -9,8 +9,10 @@
 //                      velocity stages, mj_fullM,
 //                      qfrc_bias - qfrc_passive), Jacobians (mj_jacBody, mj_jacSite), the task
 //                      p and J, the measured task velocity, the arm's manipulability;
-//   (Python)           Eq. 12 (SingularHandler) and the desired points p_d(k), p_d(k+1);
-//   uvms_rac_command   Eqs. 10-11, Eq. 9 (block solution), Eqs. 13 and 15, the base force as a
+//   (Python)           Eq. 12 (SingularHandler: the base's desired velocity) and the desired tip
+//                      at k + 1;
+//   uvms_rac_command   the desired point p_d(k+1) (base reference + Eq. 12 offset, tip; p_d(k) is
+//                      the last sample's), Eqs. 10-11, Eq. 9 (block solution), Eqs. 13 and 15, the base force as a
 //                      body wrench, the "clip" allocation or the "wls" Allocator's fast path
 //                      (returns 1 when that does not apply: Python's Allocator gives the thrusts);
 //   uvms_rac_finish    the achieved base force, the observers' updates (Eq. 14 corrected,
@@ -31,8 +33,10 @@ typedef struct {
   int nq, nv, nb, na, ntask, nbt, ntr, nvec;
   int free_base, tip_orient, square, observer, observer_arm, clip_alloc, alloc_input;
   int nthr, nwr, nmot, base_body, tip_site, base_qadr, wls_fast;
+  int nbv, nlin;  // base entries of a desired point (p_d = base, tip), of them the Eq. 12 offset's
   // index arrays
   const int *base_dofs, *arm_dofs, *tip_rows, *base_qpos, *arm_qadr, *wrench_rows, *motor_idx;
+  const int* lin;  // where the offset's entries are in the base part of p_d
   // parameters
   double T, dls_threshold, dls_damping, null_kp, null_kd, g, h, g_arm, h_arm;
   const double *gamma, *lam, *q_rest, *Jb, *Jb_pinvT, *B, *B_pinv, *lo, *hi, *motor_lo, *motor_hi, *Q;
@@ -44,6 +48,9 @@ typedef struct {
   double *qd, *M, *hb, *J, *p, *R, *R_base, *pd_meas, *scalars;  // scalars: manip, det_B, dls, mu2
   double *e_p, *e_v, *v_d, *a_d, *qdd, *u_B, *u_app, *f_e_hat, *f_m_hat, *f_t, *f_tM, *u_M;
   double *body, *thrust, *sat, *torques, *base_quat;
+  // desired points (Python gives the tip at k + 1 and Eq. 12's base velocity when it moves the
+  // offset): base reference, the Eq. 12 offset (state), its velocity, the tip; p_d(k) as output
+  double *ref, *off, *v_base, *tipn, *pd_out;
   // the controller's nominal model and its data
   const mjModel* m;
   mjData* d;
@@ -264,9 +271,16 @@ int uvms_rac_measure(uvms_rac* s, int first, int has_qd) {
 }
 
 // Eqs. 10-11, Eq. 9, Eqs. 13 and 15, allocation ("clip"). Returns 1 when Python allocates.
-int uvms_rac_command(uvms_rac* s, int first) {
+int uvms_rac_command(uvms_rac* s, int first, int moving) {
   int nv = s->nv, nt = s->ntask, nbt = s->nbt, ntr = s->ntr, na = s->na, nb = s->nb;
   const double T = s->T;
+  // p_d(k + 1) (RAC._desired): the base reference plus the Eq. 12 offset, which moves by T v
+  // when the base follows (off(k+1) = off(k) + T v_base), and the tip at k + 1
+  if (moving)
+    for (int j = 0; j < s->nlin; j++) s->off[j] += T * s->v_base[j];
+  for (int i = 0; i < s->nbv; i++) s->pdn[i] = s->ref[i];
+  for (int j = 0; j < s->nlin; j++) s->pdn[s->lin[j]] += s->off[j];
+  for (int i = s->nbv; i < s->nvec; i++) s->pdn[i] = s->tipn[i - s->nbv];
   const double* J = s->J;
   const double* M = s->M;
   const int *b = s->base_dofs, *a = s->arm_dofs;
@@ -493,9 +507,12 @@ int uvms_rac_finish(uvms_rac* s) {
   }
   for (int k = 0; k < s->nmot; k++) s->torques[k] = s->u_M[s->motor_idx[k]];
   if (s->free_base) mju_mat2Quat(s->base_quat, s->Rd);
-  // the state for the next sample
+  // the state for the next sample (its p_d(k) is this one's p_d(k + 1))
+  mju_copy(s->pd_out, s->pd, s->nvec);
   mju_copy(s->pd_prev, s->pd, s->nvec);
   mju_copy(s->Rd_prev, s->Rd, 18);
+  mju_copy(s->pd, s->pdn, s->nvec);
+  mju_copy(s->Rd, s->Rdn, 18);
   mju_copy(s->e_p_prev, s->e_p, nt);
   mju_copy(s->q_prev, s->q, s->nq);
   mju_copy(s->p_prev, s->p, s->nvec);
