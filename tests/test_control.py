@@ -329,6 +329,45 @@ def test_runs_are_deterministic():
     assert not np.array_equal(a.signals["q_measured"], c.signals["q_measured"])
 
 
+def test_run_result_keeps_signals_that_come_and_go():
+    """A controller whose signals change from sample to sample (one appears at k = 3, one is
+    missing at k = 5): each signal's array holds the samples that have it, in order; a run whose
+    rows all have the same signals stacks them alike (same values, dtypes and shapes)."""
+    from uvms_mj.controllers.base import Command
+
+    class Varying:
+        name = "varying"
+
+        def reset(self, m):
+            pass
+
+        def compute(self, m):
+            sig = {"k": m.k, "vec": np.array([m.k, 2.0 * m.k]), "flag": m.k % 2 == 0}
+            if m.k >= 3:
+                sig["late"] = float(m.k)
+            if m.k == 5:
+                del sig["vec"]
+            return Command(thrust=np.zeros(3), torques=np.zeros(2), signals=sig)
+
+    n = 10
+    res = run_closed_loop(Plant(), Varying(), duration=(n - 1) * T, T=T)
+    assert res.status == "ok" and len(res.t) == n
+    np.testing.assert_array_equal(res.signals["k"], np.arange(n))
+    np.testing.assert_array_equal(res.signals["late"], np.arange(3, n, dtype=float))
+    np.testing.assert_array_equal(res.signals["vec"], [[k, 2.0 * k] for k in range(n) if k != 5])
+    assert res.signals["flag"].dtype == bool and res.signals["q_true"].shape == (n, 5)
+    assert list(res.signals)[:3] == ["k", "vec", "flag"] and "late" in res.signals
+
+    class Steady(Varying):
+        def compute(self, m):
+            return Command(thrust=np.zeros(3), torques=np.zeros(2),
+                           signals={"k": m.k, "vec": np.array([m.k, 2.0 * m.k]), "flag": m.k % 2 == 0})
+
+    res = run_closed_loop(Plant(), Steady(), duration=(n - 1) * T, T=T)
+    assert res.signals["k"].dtype.kind == "i" and res.signals["flag"].dtype == bool
+    np.testing.assert_array_equal(res.signals["vec"], [[k, 2.0 * k] for k in range(n)])
+
+
 @pytest.mark.slow
 def test_paper_experiment_with_and_without_observer():
     """The paper's claim in our plant (measured: base position RMS 0.091 -> 0.036 mm, attitude RMS

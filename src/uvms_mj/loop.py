@@ -10,6 +10,7 @@ time and the reason (the record up to then is kept).
 from __future__ import annotations
 
 import math
+import operator
 from dataclasses import dataclass, field
 from typing import Callable
 
@@ -264,10 +265,15 @@ def run_closed_loop(
             status, reason = "diverged", str(exc)
             break
     keys = dict.fromkeys(key for row in rows[:1] for key in row)  # first-appearance order
+    uniform = True  # every row has the first row's signals
     for row in rows[1:]:
         if len(row) != len(keys) or not keys.keys() >= row.keys():
             keys.update(dict.fromkeys(row))
-    signals = {key: np.asarray([row[key] for row in rows if key in row]) for key in keys}
+            uniform = False
+    if uniform:
+        signals = {key: np.asarray(list(map(operator.itemgetter(key), rows))) for key in keys}
+    else:
+        signals = {key: np.asarray([row[key] for row in rows if key in row]) for key in keys}
     meta = {"T": T, "dt": dt, "seed": seed, "controller": controller_name(controller)}
     warned = mujoco_warnings(clear=True)
     if warned:

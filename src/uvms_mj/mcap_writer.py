@@ -85,6 +85,8 @@ class LeanWriter(Writer):
         parts: list[bytes] = []
         append = parts.append
         records: dict[int, list] = {}  # channel -> its message index records in this chunk
+        added: dict[int, int] = {}  # channel -> messages added (the statistics' counts, at the end)
+        in_chunk = cb.num_messages  # the chunk builder's count, kept here between chunks
         for messages, log_time, sequence in samples:
             # the bookkeeping of Writer.add_message (statistics) and ChunkBuilder.add_message
             if st.message_count == 0 or log_time < st.message_start_time:
@@ -92,32 +94,39 @@ class LeanWriter(Writer):
             if log_time > st.message_end_time:
                 st.message_end_time = log_time
             st.message_count += len(messages)
-            if cb.num_messages == 0 or log_time < cb.message_start_time:
+            if in_chunk == 0 or log_time < cb.message_start_time:
                 cb.message_start_time = log_time
             if log_time > cb.message_end_time:
                 cb.message_end_time = log_time
             pub = log_time if publish is None else publish
             for cid, data in messages:
-                counts[cid] += 1
                 recs = records.get(cid)
                 if recs is None:
                     index = indices.get(cid)
                     if index is None:
                         index = indices[cid] = MessageIndex(channel_id=cid, records=[])
                     recs = records[cid] = index.records
+                    added.setdefault(cid, 0)
                 recs.append((log_time, pos))
-                cb.num_messages += 1
-                append(pack(_OP_MESSAGE, 22 + len(data), cid, sequence, log_time, pub))
+                added[cid] += 1
+                in_chunk += 1
+                n = len(data)
+                append(pack(_OP_MESSAGE, 22 + n, cid, sequence, log_time, pub))
                 append(data)
-                pos += 31 + len(data)  # the record: 9 bytes of opcode and length, 22 of fields, the data
+                pos += 31 + n  # the record: 9 bytes of opcode and length, 22 of fields, the data
                 if pos > limit:  # as the Writer: the chunk ends after the message that fills it
                     buf.write(b"".join(parts))
                     parts.clear()
+                    cb.num_messages = in_chunk
                     self._Writer__maybe_finalize_chunk()
+                    in_chunk = cb.num_messages  # (0: a new chunk)
                     records.clear()  # the new chunk has new indexes
                     buf = cb.record_writer._buffer  # a new chunk, starting at this sample's time
                     pos = buf.tell()
                     cb.message_start_time = cb.message_end_time = log_time
+        cb.num_messages = in_chunk
+        for cid, n in added.items():
+            counts[cid] += n
         if parts:
             buf.write(b"".join(parts))
 
