@@ -55,6 +55,8 @@ from ..rotations import mat_to_quat, quat_to_mat, rotation_log
 
 #: Samples of desired tip positions evaluated at once (:meth:`RAC._tip_k`).
 TIP_BLOCK = 600
+#: Samples of the compiled kernel's results held in one array (:meth:`RAC._result_row`).
+RESULTS_CHUNK = 600
 
 #: Default gains per task block (the paper's Gamma = Lambda = diag(0.3, 0.3, 0.2, 0.2, 0.2) on
 #: its planar task: 0.3 for the base position, 0.2 for the base rotation and the tip).
@@ -497,8 +499,12 @@ class RAC(Controller):
         sig = {} if self.free else {"p_desired": "pd_out", "p_measured": "p"}  # signal: kernel output, in order
         sig.update(e_p="e_p", e_v="e_v", v_desired="v_d", a_desired="a_d", qdd_desired="qdd", u_B="u_B",
                    u_B_applied="u_app", f_E_hat="f_e_hat")
-        self._signal_views = (tuple(sig), tuple(ws.slices[v] for v in sig.values()))
-        self._cmd_views = (ws.slices["thrust"], ws.slices["torques"])
+        # the results a sample returns, in this order: the signals above, the commands, then what
+        # _compute_kernel reads of the kernel's outputs for this robot
+        self._signal_names = tuple(sig)
+        extra = (("f_m_hat",) if self.observer_arm else ()) + (("pd_out", "base_quat", "p") if self.free else ())
+        self._result_slices = tuple(ws.slices[v] for v in (*sig.values(), "thrust", "torques", *extra))
+        self._results = None  # [next row, rows, flags, views per result] of the results chunk
         a = ws.a
         self._ws_views = (a["q"], a["qd_meas"], a["scalars"], a["v_base"], a["tipn"], a["sat"])
         a["ref"][:] = self._ref_pos  # the desired points' base part: reference + Eq. 12 offset (0 now)
@@ -546,31 +552,46 @@ class RAC(Controller):
         rc = ws.command(ws.ptr, first, moving)
         if rc < 0:
             raise np.linalg.LinAlgError("Singular matrix")
+        saturated = None
         if rc == 1:  # "wls": the Allocator
             a = ws.a
             res = self.allocator(a["body"][self.wrench_rows])
             a["thrust"][:] = res.thrust
-            saturated = np.asarray(res.saturated, dtype=bool)
-        else:
-            saturated = a_sat != 0.0
+            saturated = res.saturated
         ws.finish(ws.ptr)
-        b = ws.block.copy()  # this sample's results (the kernel's buffers are reused)
-        names, views = self._signal_views
-        signals = dict(zip(names, map(b.__getitem__, views)))  # [p_desired, p_measured,] e_p ... f_E_hat
+        out = self._result_row(ws.block, a_sat if saturated is None else saturated)
+        names = self._signal_names
+        n = len(names)
+        signals = dict(zip(names, out))  # [p_desired, p_measured,] e_p ... f_E_hat
         signals.update(manipulability=manip, singular_phase=sh.phase, dls_active=sc.item(2) != 0.0,
-                       thrust_saturated=saturated)
-        sl = ws.slices
+                       thrust_saturated=out[-1])
+        rest = out[n + 2:-1]  # [f_m_hat,] [pd_out, base_quat, p]
         if self.observer_arm:
-            signals["f_M_hat"] = b[sl["f_m_hat"]]
+            signals["f_M_hat"] = rest.pop(0)
         if self.free:
-            p_d = b[sl["pd_out"]]
-            signals["base_desired"] = np.concatenate((p_d[:3], b[sl["base_quat"]]))
+            p_d, base_quat, p = rest
+            signals["base_desired"] = np.concatenate((p_d[:3], base_quat))
             signals["tip_desired"] = p_d[3:6]
-            signals["tip_measured"] = b[sl["p"]][3:6]
+            signals["tip_measured"] = p[3:6]
         else:
             signals["det_B"] = sc.item(1)
-        thr, tor = self._cmd_views
-        return Command(b[thr], b[tor], signals)
+        return Command(out[n], out[n + 1], signals)
+
+    def _result_row(self, block: np.ndarray, saturated) -> list[np.ndarray]:
+        """This sample's results as arrays of their own (the kernel's buffers are reused): the
+        kernel's output block and the thrusters' saturation flags copied into the next row of a
+        chunk of ``RESULTS_CHUNK`` samples, whose views of each result are made for the whole
+        chunk at once (a new chunk when it is full: rows are never written twice)."""
+        ch = self._results
+        if ch is None or ch[0] == RESULTS_CHUNK:
+            rows = np.empty((RESULTS_CHUNK, block.size))
+            flags = np.empty((RESULTS_CHUNK, np.size(saturated)), dtype=bool)
+            ch = self._results = [0, rows, flags, [list(rows[:, s]) for s in self._result_slices] + [list(flags)]]
+        i = ch[0]
+        ch[0] = i + 1
+        ch[1][i] = block
+        ch[2][i] = saturated  # (!= 0: True)
+        return [views[i] for views in ch[3]]
 
     def _velocity(self, q: np.ndarray) -> np.ndarray:
         """Backward difference of the measured coordinates as qvel (quaternions included)."""
