@@ -95,15 +95,12 @@ def test_wls_saturation_falls_back_to_the_allocator():
 @pytest.fixture
 def kernel_mode(monkeypatch):
     """Set UVMS_MJ_KERNEL and load afresh (the process's loaded kernel is restored after)."""
-    saved = (kernel._tried, kernel._lib, kernel._reason)
-
     def load(mode: str):
         monkeypatch.setenv(kernel.ENV_KERNEL, mode)
-        kernel._tried, kernel._lib, kernel._reason = False, None, None
+        monkeypatch.setattr(kernel, "_LOADER", kernel._LOADER.fresh())
         return kernel.library()
 
-    yield load
-    kernel._tried, kernel._lib, kernel._reason = saved
+    return load
 
 
 def test_kernel_off_runs_the_python_code(kernel_mode):

@@ -147,9 +147,9 @@ import threading
 import time
 import warnings
 from contextlib import contextmanager
-from itertools import repeat
 from dataclasses import dataclass
 from importlib import metadata as _importlib_metadata
+from itertools import repeat
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Iterator, Mapping
 

@@ -240,6 +240,31 @@ def load_compiled(stem: str, srcs: list[Path], what: str):
             return None, f"cannot load {what}: {exc2 or exc}"
 
 
+class CompiledOnce:
+    """One compiled fast path, loaded at most once per process (thread-safe): :meth:`get` gives
+    ``configure(lib)`` of the library :func:`load_compiled` loads, or None (:attr:`reason` says
+    why)."""
+
+    def __init__(self, stem: str, srcs: list[Path], what: str, configure) -> None:
+        self.stem, self.srcs, self.what, self.configure = stem, srcs, what, configure
+        self._lock = threading.Lock()
+        self._tried = False
+        self.value = None
+        self.reason: str | None = None
+
+    def get(self):
+        with self._lock:
+            if not self._tried:
+                self._tried = True
+                lib, self.reason = load_compiled(self.stem, self.srcs, self.what)
+                self.value = self.configure(lib) if lib is not None else None
+            return self.value
+
+    def fresh(self) -> "CompiledOnce":
+        """The same fast path, not loaded yet (e.g. to load it again under another setting)."""
+        return CompiledOnce(self.stem, self.srcs, self.what, self.configure)
+
+
 def unavailable_reason() -> str | None:
     """Why :func:`register_plugins` returned False (None if not tried or registered)."""
     return _reason

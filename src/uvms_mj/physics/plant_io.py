@@ -4,47 +4,39 @@
 through :func:`library` when it can: the same steps and numbers as its Python code (the
 reference, used with ``UVMS_MJ_KERNEL=off``, without a C compiler or on the Python hydrodynamics
 backend), in one call instead of a dozen numpy and MuJoCo calls. Built and loaded like the RAC
-kernel (:mod:`uvms_mj.controllers.kernel`), by :func:`uvms_mj.physics.build.load_compiled`.
+kernel (:mod:`uvms_mj.controllers.kernel`), by :class:`uvms_mj.physics.build.CompiledOnce`.
 """
 
 from __future__ import annotations
 
 import ctypes
-import threading
 from pathlib import Path
 
 import numpy as np
 
+from . import build
+
 SOURCE = Path(__file__).resolve().parent / "plant_io.c"
 
-_lock = threading.Lock()
-_lib: ctypes.CDLL | None = None
-_tried = False
-_reason: str | None = None
+
+def _configure(lib: ctypes.CDLL):
+    fn = lib.uvms_plant_step_observe
+    fn.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_double]
+    fn.restype = ctypes.c_int
+    return fn
+
+
+_LOADER = build.CompiledOnce("uvms_plant_io", [SOURCE], "the compiled plant sample", _configure)
 
 
 def library():
     """The compiled ``uvms_plant_step_observe`` (ctypes function), or None (:func:`unavailable_reason`)."""
-    global _lib, _tried, _reason
-    with _lock:
-        if _tried:
-            return _lib
-        _tried = True
-        from . import build
-
-        lib, _reason = build.load_compiled("uvms_plant_io", [SOURCE], "the compiled plant sample")
-        if lib is None:
-            return None
-        fn = lib.uvms_plant_step_observe
-        fn.argtypes = [ctypes.c_void_p, ctypes.c_int, ctypes.c_double]
-        fn.restype = ctypes.c_int
-        _lib = fn
-        return fn
+    return _LOADER.get()
 
 
 def unavailable_reason() -> str | None:
     """Why :func:`library` returned None (None if it was not tried or is loaded)."""
-    return _reason
+    return _LOADER.reason
 
 
 class _Struct(ctypes.Structure):

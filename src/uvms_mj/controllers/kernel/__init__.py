@@ -15,7 +15,6 @@ Python callback), the Python code runs too. :func:`unavailable_reason` says why 
 from __future__ import annotations
 
 import ctypes
-import threading
 from pathlib import Path
 
 import numpy as np
@@ -56,35 +55,27 @@ class _Struct(ctypes.Structure):
                 + [("m", ctypes.c_void_p), ("d", ctypes.c_void_p)])
 
 
-_lock = threading.Lock()
-_lib: ctypes.CDLL | None = None
-_reason: str | None = None
-_tried = False
+def _configure(lib: ctypes.CDLL) -> ctypes.CDLL:
+    p = ctypes.c_void_p
+    for name, args in (("uvms_rac_measure", [p, ctypes.c_int, ctypes.c_int]),
+                       ("uvms_rac_command", [p, ctypes.c_int, ctypes.c_int]), ("uvms_rac_finish", [p])):
+        fn = getattr(lib, name)
+        fn.argtypes, fn.restype = args, ctypes.c_int
+    return lib
+
+
+_LOADER = build.CompiledOnce("uvms_rac_kernel", [SOURCE], "the RAC kernel", _configure)
 
 
 def library() -> ctypes.CDLL | None:
     """The compiled kernel (built into the cache if needed), or None (:func:`unavailable_reason`
     says why). Once per process; thread-safe."""
-    global _lib, _reason, _tried
-    with _lock:
-        if _tried:
-            return _lib
-        _tried = True
-        lib, _reason = build.load_compiled("uvms_rac_kernel", [SOURCE], "the RAC kernel")
-        if lib is None:
-            return None
-        p = ctypes.c_void_p
-        for name, args in (("uvms_rac_measure", [p, ctypes.c_int, ctypes.c_int]),
-                           ("uvms_rac_command", [p, ctypes.c_int, ctypes.c_int]), ("uvms_rac_finish", [p])):
-            fn = getattr(lib, name)
-            fn.argtypes, fn.restype = args, ctypes.c_int
-        _lib = lib
-        return lib
+    return _LOADER.get()
 
 
 def unavailable_reason() -> str | None:
     """Why :func:`library` returned None (None if it was not tried or is loaded)."""
-    return _reason
+    return _LOADER.reason
 
 
 class Workspace:
