@@ -2,7 +2,7 @@
 
 The wheel gets ``uvms_mj/_build_info.py`` with ``GIT_COMMIT`` (the commit, or "unknown" when
 the source is not a git checkout, e.g. an sdist, or git is missing) and ``GIT_DIRTY`` (True,
-False or None). :func:`uvms_mj.recorder.provenance` reads it when the package does not run from
+False or None). :func:`uvms_mj.io.recorder.provenance` reads it when the package does not run from
 a checkout of its own. Editable installs need nothing: they ask git directly.
 """
 

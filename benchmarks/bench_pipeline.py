@@ -27,9 +27,9 @@ from pathlib import Path
 import mujoco
 
 from uvms_mj import default_model_path
-from uvms_mj.loop import run_closed_loop
-from uvms_mj.recorder import McapRecorder
-from uvms_mj.scenario import build, load_scenario, sensor_model
+from uvms_mj.sim.loop import run_closed_loop
+from uvms_mj.io.recorder import McapRecorder
+from uvms_mj.scenario.schema import build, load_scenario, sensor_model
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 SCENARIO = SCENARIOS / "paper.yaml"
@@ -101,7 +101,7 @@ def bare(steps: int, integrator, timestep: float, path=None) -> float:
 
 
 def sweep_job(duration: float) -> float:
-    from uvms_mj.scenario import run_scenario
+    from uvms_mj.scenario.schema import run_scenario
 
     sc = load_scenario(SCENARIO, [f"duration={duration}"])
     return run_scenario(sc).t[-1]

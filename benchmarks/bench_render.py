@@ -7,7 +7,7 @@ Simulates the paper experiment for ``--seconds`` (rac_dob), then measures, at 30
 * render fps: scene update + user geoms (desired path, tip trace) + off-screen render + clock
   overlay, frames kept in memory (no encoding);
 * encode fps: the same frames piped to imageio-ffmpeg's ffmpeg (libx264, yuv420p, veryfast);
-* end to end: ``uvms_mj.render.render_video`` (rendering and the ffmpeg process run side by side).
+* end to end: ``uvms_mj.analysis.render.render_video`` (rendering and the ffmpeg process run side by side).
 
 Prints the best of ``--repeats`` (the machine is shared: +-30 %) and the OpenGL backend in use.
 The target is at least 30 rendered frames per second at 640x480 on a 2-core machine without GPU.
@@ -22,8 +22,8 @@ import time
 from pathlib import Path
 
 import uvms_mj  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
-from uvms_mj.experiment import PaperExperiment
-from uvms_mj.render import RenderError, _open_writer, gl_status, render_frames, render_video
+from uvms_mj.sim.experiment import PaperExperiment
+from uvms_mj.analysis.render import RenderError, _open_writer, gl_status, render_frames, render_video
 
 
 def main() -> int:

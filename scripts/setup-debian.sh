@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Install the Debian packages uvms-mj needs (idempotent; as root, or through sudo):
-# python3-venv; a C compiler for the native hydrodynamics (uvms_mj.native; without it the plant
+# python3-venv; a C compiler for the native hydrodynamics (uvms_mj.planar.native; without it the plant
 # runs the pure-Python reference and the native tests are skipped); and the GL libraries for
 # headless rendering: EGL with Mesa's software renderer (llvmpipe), OSMesa as the fallback.
 set -euo pipefail

@@ -23,11 +23,11 @@ import pytest
 import yaml
 from click.testing import CliRunner
 
-from uvms_mj.cli import EXIT_INTERRUPTED, EXIT_IO, main
-from uvms_mj.controllers.base import Command, Controller
-from uvms_mj.loop import COMMAND_ABS_MAX, SensorModel, run_closed_loop
-from uvms_mj.plant import Plant
-from uvms_mj.scenario import load_scenario, scenario_warnings
+from uvms_mj.cli.main import EXIT_INTERRUPTED, EXIT_IO, main
+from uvms_mj.control.base import Command, Controller
+from uvms_mj.sim.loop import COMMAND_ABS_MAX, SensorModel, run_closed_loop
+from uvms_mj.plant.plant import Plant
+from uvms_mj.scenario.schema import load_scenario, scenario_warnings
 
 #: Every numeric field of a scenario (dotted path, list index as an int).
 NUMERIC_FIELDS = [
@@ -202,7 +202,7 @@ def test_billion_laughs_answers_fast(cli, tmp_path):
 def test_endless_input_is_refused():
     """/dev/zero is refused after the first 1 MiB (it does not hang: the timeout is only a hang
     guard, not a speed claim; a direct call answers in milliseconds)."""
-    r = subprocess.run([sys.executable, "-m", "uvms_mj.cli", "validate", "/dev/zero"], capture_output=True,
+    r = subprocess.run([sys.executable, "-m", "uvms_mj.cli.main", "validate", "/dev/zero"], capture_output=True,
                        text=True, timeout=120)
     assert r.returncode == 2 and "Traceback" not in r.stderr
     assert "'/dev/zero' is not a file" in r.stderr or "larger than 1024 KiB" in r.stderr
@@ -233,7 +233,7 @@ def test_one_sample_run_ends_with_status_and_log(cli, tmp_path):
 
 
 def test_a_run_that_raises_ends_with_status_error(cli, tmp_path, monkeypatch):
-    from uvms_mj.controllers import rac
+    from uvms_mj.control import rac
 
     def boom(self, m):
         raise np.linalg.LinAlgError("Singular matrix")
@@ -271,7 +271,7 @@ def test_absurd_commands_are_divergence():
 
 
 def test_metrics_of_a_run_without_samples():
-    from uvms_mj.experiment import METRIC_KEYS, metrics
+    from uvms_mj.sim.experiment import METRIC_KEYS, metrics
 
     res = run_closed_loop(Plant(), _Wild(at=0, value=float("nan")), 1.0, T=1 / 60)
     assert res.status == "diverged" and len(res.t) == 0
@@ -356,7 +356,7 @@ def test_output_folders_of_compare_sweep_plot(cli, scenario, tmp_path):
 
 
 def test_full_disk_is_an_io_error(cli, scenario, tmp_path, monkeypatch):
-    from uvms_mj import recorder
+    from uvms_mj.io import recorder
 
     def full(self, t, row):
         raise OSError(28, "No space left on device")
@@ -369,7 +369,7 @@ def test_full_disk_is_an_io_error(cli, scenario, tmp_path, monkeypatch):
 
 
 def test_two_writers_of_one_log(tmp_path, cli, scenario):
-    from uvms_mj.recorder import LogInUseError, McapRecorder, read_log
+    from uvms_mj.io.recorder import LogInUseError, McapRecorder, read_log
 
     path = tmp_path / "same.mcap"
     params = Plant().params
@@ -423,7 +423,7 @@ def _malformed(tmp_path: Path, good: bytes) -> dict[str, Path]:
 
 
 def test_plot_and_render_on_malformed_logs(cli, scenario, tmp_path, monkeypatch):
-    from uvms_mj import render
+    from uvms_mj.analysis import render
 
     assert cli("run", scenario, "--out", tmp_path / "good.mcap").exit_code == 0
     # No GL needed: the renderer is only reached for logs that read and replay.
@@ -457,7 +457,7 @@ def test_attitude_and_joint_noise_are_separate_sensors():
 
 
 def test_base_reference_options(tmp_path):
-    from uvms_mj.scenario import build
+    from uvms_mj.scenario.schema import build
 
     f = _write(tmp_path, {"sensors": {"position_noise": 0.01}})
     refs = {}
@@ -465,13 +465,13 @@ def test_base_reference_options(tmp_path):
         sc = load_scenario(f, [f"controller.base_reference={ref}"])
         plant, ctrl = build(sc)
         q0 = plant.q.copy()
-        from uvms_mj.controllers.base import Measurement
+        from uvms_mj.control.base import Measurement
 
         ctrl.reset(Measurement(k=0, t=0.0, q=q0 + np.r_[0.01, 0.01, 0, 0, 0], qd=None))
         refs[ref] = ctrl._ref_pos.copy()
     assert np.allclose(refs["measured"][:2], q0[:2] + 0.01)
     assert np.allclose(refs["truth"], q0[:3]) and np.allclose(refs["nominal"], q0[:3])
-    from uvms_mj.scenario import resolved, validate_scenario
+    from uvms_mj.scenario.schema import resolved, validate_scenario
 
     sc = load_scenario(f, ["controller.base_reference=truth"])
     assert validate_scenario(resolved(sc)).controller.base_reference == "truth"  # logs re-validate

@@ -5,9 +5,9 @@ from pathlib import Path
 import numpy as np
 from click.testing import CliRunner
 
-from uvms_mj.cli import main
-from uvms_mj.experiment import metrics
-from uvms_mj.recorder import read_log
+from uvms_mj.cli.main import main
+from uvms_mj.sim.experiment import metrics
+from uvms_mj.io.recorder import read_log
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 
@@ -80,7 +80,7 @@ def test_sigterm_closes_the_log_cleanly(tmp_path):
 
     out = tmp_path / "long.mcap"
     proc = subprocess.Popen(
-        [sys.executable, "-m", "uvms_mj.cli", "run", str(SCENARIOS / "paper.yaml"), "--out", str(out),
+        [sys.executable, "-m", "uvms_mj.cli.main", "run", str(SCENARIOS / "paper.yaml"), "--out", str(out),
          "--no-plots", "--set", "duration=600"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from uvms_mj.cli import main, packaged_scenarios
-from uvms_mj.recorder import read_log
+from uvms_mj.cli.main import main, packaged_scenarios
+from uvms_mj.io.recorder import read_log
 
 
 @pytest.fixture(scope="module")

@@ -7,14 +7,14 @@ import pytest
 from scipy import signal
 
 from uvms_mj import Plant
-from uvms_mj.allocation import Allocator, allocation_matrix
-from uvms_mj.controllers import ControllerError, Measurement, available, create
-from uvms_mj.controllers.builtin import LowPassZOH, damped_inverse
-from uvms_mj.experiment import PaperExperiment, metrics
-from uvms_mj.kinematics import jacobians, task_jacobian, tip_position
-from uvms_mj.loop import SensorModel, run_closed_loop
-from uvms_mj.nominal import NominalModel
-from uvms_mj.trajectory import StraightLine
+from uvms_mj.planar.allocation import Allocator, allocation_matrix
+from uvms_mj.control import ControllerError, Measurement, available, create
+from uvms_mj.control.builtin import LowPassZOH, damped_inverse
+from uvms_mj.sim.experiment import PaperExperiment, metrics
+from uvms_mj.planar.kinematics import jacobians, task_jacobian, tip_position
+from uvms_mj.sim.loop import SensorModel, run_closed_loop
+from uvms_mj.planar.nominal import NominalModel
+from uvms_mj.planar.trajectory import StraightLine
 
 T = 1 / 60
 Q0 = np.r_[0.0, 0.0, -np.pi / 2, np.pi / 3, -5 * np.pi / 18]
@@ -307,7 +307,7 @@ def test_bad_target_and_name():
 
 def test_registry_and_entry_points(monkeypatch):
     assert {"rac", "rac_dob", "pd"} <= set(available())
-    ep = metadata.EntryPoint(name="third_party_pd", value="uvms_mj.controllers.builtin:TaskPD",
+    ep = metadata.EntryPoint(name="third_party_pd", value="uvms_mj.control.builtin:TaskPD",
                              group="uvms_mj.controllers")
     real = metadata.entry_points
 
@@ -333,7 +333,7 @@ def test_run_result_keeps_signals_that_come_and_go():
     """A controller whose signals change from sample to sample (one appears at k = 3, one is
     missing at k = 5): each signal's array holds the samples that have it, in order; a run whose
     rows all have the same signals stacks them alike (same values, dtypes and shapes)."""
-    from uvms_mj.controllers.base import Command
+    from uvms_mj.control.base import Command
 
     class Varying:
         name = "varying"

@@ -1,4 +1,4 @@
-"""The dm_control environment (uvms_mj.env): dm_env conformance, the physics is the plant
+"""The dm_control environment (uvms_mj.rl.env): dm_env conformance, the physics is the plant
 (hydrodynamics included, stepping bit for bit), a zero residual is run_closed_loop with rac_dob
 bit for bit, specs from the model, determinism, divergence handling."""
 
@@ -21,11 +21,11 @@ with warnings.catch_warnings():
     # dm_control probes GLFW when it is imported; headless (conftest imports mujoco before
     # uvms_mj can choose MUJOCO_GL) that only warns about DISPLAY. These tests do not render.
     warnings.simplefilter("ignore")
-    from uvms_mj import env as uvms_env
-from uvms_mj.controllers.builtin import PAPER_T
-from uvms_mj.experiment import PaperExperiment
-from uvms_mj.loop import SensorModel, run_closed_loop
-from uvms_mj.scenario import build, validate_scenario
+    from uvms_mj.rl import env as uvms_env
+from uvms_mj.control.builtin import PAPER_T
+from uvms_mj.sim.experiment import PaperExperiment
+from uvms_mj.sim.loop import SensorModel, run_closed_loop
+from uvms_mj.scenario.schema import build, validate_scenario
 
 OBS_SHAPES = {"base_pose": 3, "joint_angles": 2, "base_velocity": 3, "joint_velocities": 2, "tip": 2,
               "target": 2, "goal": 2, "time_to_go": 1, "thrust": 3}

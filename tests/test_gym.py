@@ -1,4 +1,4 @@
-"""Gymnasium registration of the environments (uvms_mj.gym, the [gym] extra)."""
+"""Gymnasium registration of the environments (uvms_mj.rl.gym, the [gym] extra)."""
 
 import numpy as np
 import pytest
@@ -6,7 +6,7 @@ import pytest
 gymnasium = pytest.importorskip("gymnasium")
 pytest.importorskip("shimmy")
 
-import uvms_mj.gym as ugym  # noqa: E402
+import uvms_mj.rl.gym as ugym  # noqa: E402
 from gymnasium.utils.env_checker import check_env  # noqa: E402
 
 
@@ -48,7 +48,7 @@ def test_residual_zero_action_is_rac_dob():
     obs, _ = env.reset(seed=1)
     for _ in range(10):
         obs, *_ = env.step(np.zeros(5))
-    from uvms_mj import env as uvms_env
+    from uvms_mj.rl import env as uvms_env
 
     dm = uvms_env.load(residual=True, time_limit=0.5, random=1)
     ts = dm.reset()
@@ -59,7 +59,7 @@ def test_residual_zero_action_is_rac_dob():
 
 
 def test_module_style_id():
-    env = gymnasium.make("uvms_mj.gym:uvms_mj/Tracking-v0", time_limit=0.1)
+    env = gymnasium.make("uvms_mj.rl.gym:uvms_mj/Tracking-v0", time_limit=0.1)
     assert env.action_space.shape == (5,)
     env.close()
 
@@ -71,7 +71,7 @@ def test_rgb_array_render():
     import subprocess
     import sys
 
-    code = ("import gymnasium, uvms_mj.gym\n"
+    code = ("import gymnasium, uvms_mj.rl.gym\n"
             "env = gymnasium.make('uvms_mj/Tracking-v0', time_limit=0.1, render_mode='rgb_array')\n"
             "env.reset(seed=0); f = env.render()\n"
             "print(f.shape, float(f.std()))\n")

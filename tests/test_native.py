@@ -1,6 +1,6 @@
 """The C port of the planar closed form (used by the nominal model) against the Python one.
 
-The C code (src/uvms_mj/_native/hydro.c) is a line-by-line port of HydroModel.evaluate with the
+The C code (src/uvms_mj/planar/_native/hydro.c) is a line-by-line port of HydroModel.evaluate with the
 same order of operations, so it matches to rounding (measured: bit for bit); tolerance 1e-12
 relative to each quantity's scale. Tests that need the library are skipped (with the reason)
 where it cannot be built, e.g. without a C compiler. (The plant's hydrodynamics are the MuJoCo
@@ -15,7 +15,7 @@ import sys
 import numpy as np
 import pytest
 
-import uvms_mj.native as native
+import uvms_mj.planar.native as native
 from uvms_mj import HydroModel, HydroTerms, Plant, strip_integrals
 from uvms_mj.physics import build
 
@@ -104,7 +104,7 @@ def test_build_failures_are_reported(monkeypatch, tmp_path, cc, pattern):
 
 def test_parallel_builds_share_one_library(lib, tmp_path):
     """Four processes building into an empty cache at once: one library, no leftovers, all load."""
-    code = "import uvms_mj.native as n; lib = n.NativeLib(n.build()); print(lib.path)"
+    code = "import uvms_mj.planar.native as n; lib = n.NativeLib(n.build()); print(lib.path)"
     env = {**os.environ, build.ENV_CACHE: str(tmp_path)}
     procs = [subprocess.Popen([sys.executable, "-c", code], env=env, stdout=subprocess.PIPE, text=True)
              for _ in range(4)]

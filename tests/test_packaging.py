@@ -9,7 +9,7 @@ from importlib import metadata
 from pathlib import Path
 
 import uvms_mj
-from uvms_mj.cli import packaged_scenarios, scenarios_dir
+from uvms_mj.cli.main import packaged_scenarios, scenarios_dir
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -34,10 +34,10 @@ def test_licence_typed_and_scenarios_in_the_wheel():
 
 
 def test_dm_control_is_optional():
-    """Without dm-control, uvms_mj works and uvms_mj.env says what to install."""
+    """Without dm-control, uvms_mj works and uvms_mj.rl.env says what to install."""
     code = ("import sys; sys.modules['dm_control'] = None\n"
-            "import uvms_mj; from uvms_mj.scenario import load_scenario\n"
-            "try:\n    import uvms_mj.env\nexcept ImportError as exc:\n    print(exc)\n")
+            "import uvms_mj; from uvms_mj.scenario.schema import load_scenario\n"
+            "try:\n    import uvms_mj.rl.env\nexcept ImportError as exc:\n    print(exc)\n")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert out.returncode == 0, out.stderr
     assert "pip install 'uvms-mj[rl]'" in out.stdout

@@ -139,7 +139,7 @@ def test_step_observe_is_step_then_observe(kind):
     same states, tip and thrust readouts bit for bit over 200 samples of changing commands, and
     a state spoiled from outside reported as step() reports it."""
     from uvms_mj.physics import plant_io
-    from uvms_mj.robot import InitialState, RobotPlant
+    from uvms_mj.plant.robot import InitialState, RobotPlant
 
     if plant_io.library() is None:
         pytest.skip(f"no compiled plant sample: {plant_io.unavailable_reason()}")
@@ -240,7 +240,7 @@ def test_extra_data(backend, native_available):
 def test_tip_position_is_current_after_steps():
     """After mj_step, MuJoCo's site_xpos lags the state (RK4: an intermediate stage); the
     accessor must give the tip of the current qpos (analytic Eq. 1, 1e-12)."""
-    from uvms_mj.kinematics import ArmGeometry, tip_position
+    from uvms_mj.planar.kinematics import ArmGeometry, tip_position
 
     plant = Plant()
     plant.set_state(joint_velocities=(1.0, -1.0))

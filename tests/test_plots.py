@@ -1,4 +1,4 @@
-"""Figures of a run (uvms_mj.plots): files written, valid non-empty PNGs, logs without the
+"""Figures of a run (uvms_mj.analysis.plots): files written, valid non-empty PNGs, logs without the
 observer signals (pd baseline) and logs missing more than that."""
 
 from __future__ import annotations
@@ -10,8 +10,8 @@ import matplotlib
 import numpy as np
 import pytest
 
-from uvms_mj.experiment import PaperExperiment
-from uvms_mj.plots import plot_comparison, plot_run, tracking_errors
+from uvms_mj.sim.experiment import PaperExperiment
+from uvms_mj.analysis.plots import plot_comparison, plot_run, tracking_errors
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 

@@ -1,6 +1,6 @@
 """The plugin layer on the paper's planar robot against the planar closed form (an oracle).
 
-``uvms_mj.hydro.HydroModel`` is the planar closed form of the same physics (written for the
+``uvms_mj.planar.hydro.HydroModel`` is the planar closed form of the same physics (written for the
 paper's chain on plain floats, independently of the plugins' generic 3-D formulation): at
 random states and currents the plugins' added-mass matrix and generalized hydrodynamic force
 must agree with it to 1e-10 (relative to the largest entry; both are exact formulas evaluated in
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from uvms_mj import HydroTerms, Plant
-from uvms_mj.hydro import HydroModel
+from uvms_mj.planar.hydro import HydroModel
 
 from conftest import added_and_passive
 

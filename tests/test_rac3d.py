@@ -15,13 +15,13 @@ import numpy as np
 import pytest
 
 import uvms_mj  # noqa: F401
-from uvms_mj.controllers import create
-from uvms_mj.controllers.base import Measurement
-from uvms_mj.experiment import metrics
-from uvms_mj.loop import run_closed_loop
-from uvms_mj.nominal_robot import NominalRobot
-from uvms_mj.robot import InitialState, RobotPlant
-from uvms_mj.scenario import load_scenario, run_scenario
+from uvms_mj.control import create
+from uvms_mj.control.base import Measurement
+from uvms_mj.sim.experiment import metrics
+from uvms_mj.sim.loop import run_closed_loop
+from uvms_mj.control.nominal import NominalRobot
+from uvms_mj.plant.robot import InitialState, RobotPlant
+from uvms_mj.scenario.schema import load_scenario, run_scenario
 
 REPO = Path(__file__).resolve().parents[1]
 SCEN = REPO / "scenarios"
@@ -94,8 +94,8 @@ def test_redundant_arm_solution_satisfies_the_task_and_weights():
 def test_tip_circle_is_tracked_in_3d():
     """A 5 cm circle (20 s per turn) in still water with the exact model: the RAC error
     dynamics are those of a sampled loop with the thruster lag; the tip stays within 1 mm."""
-    from uvms_mj.trajectories import Shifted as _Shifted
-    from uvms_mj.trajectories import Circle
+    from uvms_mj.control.trajectories import Shifted as _Shifted
+    from uvms_mj.control.trajectories import Circle
 
     p = _plant()
     tr = Circle(centre=(0, 0, 0), radius=0.05, normal=(1, 0, 0), period=20.0, t_ramp=5.0)
@@ -121,14 +121,14 @@ def test_observer_cuts_the_base_error_in_the_studies(study, duration):
 
 
 def test_rac_on_a_robot_without_tip_site_is_refused():
-    from uvms_mj.controllers import ControllerError
+    from uvms_mj.control import ControllerError
 
     with pytest.raises(ControllerError, match="end-effector site"):
         create("rac", robot=NominalRobot("bluerov2_heavy"))
 
 
 def test_bad_gains_name_the_task_size():
-    from uvms_mj.controllers import ControllerError
+    from uvms_mj.control import ControllerError
 
     with pytest.raises(ControllerError, match="task size"):
         create("rac", robot=NominalRobot("bluerov2_alpha"), gamma=[0.3, 0.3])
@@ -141,7 +141,7 @@ def test_paper_robot_follows_any_trajectory_kind():
     """trajectory.curve on the paper scenario: the generic RAC follows a circle in the plane
     (still water and the exact model: sub-millimetre); the line-only controllers refuse it
     when the scenario is built, naming the controller."""
-    from uvms_mj.scenario import ScenarioError, build
+    from uvms_mj.scenario.schema import ScenarioError, build
 
     curve = "trajectory.curve={kind: circle, centre: [0, 0, 0], radius: 0.05, period: 20, t_ramp: 5, t_start: 1}"
     sc = load_scenario(SCEN / "paper.yaml", [curve, "duration=15", "plant.model_mismatch=false"])

@@ -1,6 +1,6 @@
-"""The compiled RAC kernel (uvms_mj/controllers/kernel) against the RAC's Python code.
+"""The compiled RAC kernel (uvms_mj/control/kernel) against the RAC's Python code.
 
-The Python code of :class:`uvms_mj.controllers.rac.RAC` is the reference (itself checked against
+The Python code of :class:`uvms_mj.control.rac.RAC` is the reference (itself checked against
 the planar closed form and exact-nominal truths in test_rac3d.py); the kernel computes the same
 equations in C with other operation orders and its own small inverses. Every closed-loop run
 below is made twice, kernel and Python, and every signal must agree to 1e-9 relative to its
@@ -19,11 +19,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from uvms_mj.controllers import kernel
-from uvms_mj.controllers.builtin import SingularHandler
-from uvms_mj.experiment import metrics
-from uvms_mj.loop import run_closed_loop
-from uvms_mj.scenario import build, load_scenario, sensor_model
+from uvms_mj.control import kernel
+from uvms_mj.control.builtin import SingularHandler
+from uvms_mj.sim.experiment import metrics
+from uvms_mj.sim.loop import run_closed_loop
+from uvms_mj.scenario.schema import build, load_scenario, sensor_model
 
 SCEN = Path(__file__).resolve().parents[1] / "scenarios"
 
@@ -82,13 +82,16 @@ def test_kernel_gives_the_python_run(case):
 def test_wls_saturation_falls_back_to_the_allocator():
     """Thrust limits of 3 N in the nominal model: the fast path (all thrusters free) does not
     apply at some samples and the Allocator redistributes (rc 1 of uvms_rac_command); same run
-    as the Python code, to 1e-4 relative: a saturated allocation switches its active set where
-    two choices tie to round-off (kinks of a continuous map), measured 1e-5 over the run."""
+    as the Python code, to 1e-3 relative: a saturated allocation switches its active set where
+    two choices tie to round-off (kinks of a continuous map), so the C and numpy paths, whose
+    floating-point order differs with the CPU's vector instructions, part there: measured 1e-5
+    relative on one CPU and 1.1e-4 (6 of 2408 thrusts, 3.3e-4 N of 3 N) on an AVX-512 one;
+    1e-3 keeps a ~10x margin over the worst seen and still catches any real difference."""
     limits = ", ".join(f"bluerov2_t{i}.forcerange: [-3, 3]" for i in range(1, 9))
     sets = ["duration=6", f"nominal.overrides={{{limits}}}"]
     a = _run("bluerov2_alpha_circle_current", sets, True)
     assert a.signals["thrust_saturated"].any()
-    _assert_same_runs(a, _run("bluerov2_alpha_circle_current", sets, False), rel=1e-4, rel_metrics=1e-4,
+    _assert_same_runs(a, _run("bluerov2_alpha_circle_current", sets, False), rel=1e-3, rel_metrics=1e-3,
                       flag_mismatch=0.01)  # a thruster exactly at its limit in one run, a hair inside in the other
 
 
@@ -163,7 +166,7 @@ def test_desired_tip_blocks_are_the_per_sample_path():
     """RAC reads the paper line's desired tips in blocks (StraightLine.positions, over several
     blocks of TIP_BLOCK samples in 40 s): the run is the same, bit for bit, as with a trajectory
     offering only position(t) (evaluated sample by sample)."""
-    from uvms_mj.controllers.rac import TIP_BLOCK
+    from uvms_mj.control.rac import TIP_BLOCK
 
     class PerSample:  # the same line without positions()
         def __init__(self, line):

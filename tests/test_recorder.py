@@ -17,10 +17,10 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from uvms_mj.experiment import PaperExperiment, metrics
-from uvms_mj.loop import RunResult, run_closed_loop
-from uvms_mj.nominal import params_from_file
-from uvms_mj.recorder import (
+from uvms_mj.sim.experiment import PaperExperiment, metrics
+from uvms_mj.sim.loop import RunResult, run_closed_loop
+from uvms_mj.planar.nominal import params_from_file
+from uvms_mj.io.recorder import (
     SCHEMAS,
     LogData,
     McapRecorder,
@@ -400,8 +400,8 @@ def run_child(script: str, path: Path) -> subprocess.Popen:
     code = textwrap.dedent("""
         import math, sys, time
         import numpy as np
-        from uvms_mj.nominal import params_from_file
-        from uvms_mj.recorder import McapRecorder, handle_sigterm
+        from uvms_mj.planar.nominal import params_from_file
+        from uvms_mj.io.recorder import McapRecorder, handle_sigterm
         sys.path.insert(0, {tests!r})
         from test_recorder import synthetic_row
         path = {path!r}
@@ -590,7 +590,7 @@ def test_git_commit_outside_a_checkout(monkeypatch):
     import sys as _sys
     import types
 
-    from uvms_mj import recorder
+    from uvms_mj.io import recorder
 
     monkeypatch.setattr(recorder, "_git_checkout_info", lambda: {})
     monkeypatch.setitem(_sys.modules, "uvms_mj._build_info", None)  # no build info: import fails
@@ -610,7 +610,7 @@ def test_legacy_joint_states_log_reads_back(recorded, tmp_path):
     arrays on /joint_states) reads back exactly like the new one."""
     from mcap.writer import Writer
 
-    from uvms_mj.recorder import LEGACY_JOINT_STATES
+    from uvms_mj.io.recorder import LEGACY_JOINT_STATES
 
     path, result, _, _ = recorded
     old = tmp_path / "old.mcap"
@@ -703,7 +703,7 @@ def test_lean_writer_writes_what_mcaps_writer_writes(compression):
     from mcap.records import Chunk, ChunkIndex
     from mcap.writer import CompressionType, Writer
 
-    from uvms_mj.mcap_writer import LeanWriter
+    from uvms_mj.io.mcap_writer import LeanWriter
 
     comp = CompressionType[compression]
     stock = _writer_bytes(Writer, comp)

@@ -1,4 +1,4 @@
-"""Off-screen video of a run (uvms_mj.render): frame count and size, non-blank frames, the
+"""Off-screen video of a run (uvms_mj.analysis.render): frame count and size, non-blank frames, the
 robot framed and moving, and a one-line RenderError when OpenGL cannot load.
 
 Needs the headless GL packages (Debian: libegl1 libegl-mesa0 libgl1-mesa-dri libopengl0, or
@@ -18,8 +18,8 @@ import imageio.v2 as iio2
 import numpy as np
 import pytest
 
-from uvms_mj.experiment import PaperExperiment
-from uvms_mj.render import RenderError, render_frames, render_video
+from uvms_mj.sim.experiment import PaperExperiment
+from uvms_mj.analysis.render import RenderError, render_frames, render_video
 
 DURATION = 2.0  # s of simulated motion
 FPS = 30
@@ -125,7 +125,7 @@ _CHILD = textwrap.dedent(
     from types import SimpleNamespace
     import numpy as np
     import uvms_mj
-    from uvms_mj.render import RenderError, render_video
+    from uvms_mj.analysis.render import RenderError, render_video
     plant = uvms_mj.Plant()  # simulation still works without GL
     plant.step(10)
     t = np.linspace(0, 0.2, 13)
@@ -186,7 +186,7 @@ def test_configure_gl_only_chooses_for_headless(extra: dict, expect: str) -> Non
     env = {k: v for k, v in os.environ.items() if k not in ("MUJOCO_GL", "PYOPENGL_PLATFORM", "DISPLAY",
                                                            "WAYLAND_DISPLAY")}
     env.update(extra)
-    code = ("import os, sys; from uvms_mj.render import configure_gl; configure_gl(); "
+    code = ("import os, sys; from uvms_mj.analysis.render import configure_gl; configure_gl(); "
             "print(os.environ.get('MUJOCO_GL'))")
     proc = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60)
     got = proc.stdout.strip()
@@ -203,7 +203,7 @@ def test_render_error_type() -> None:
 def test_labels_scale_bar_and_name(run) -> None:
     """Labels (controller name top right, legend bottom left, scale bar bottom right) change only
     their corners; the scale bar has the length of the plane of motion's metres."""
-    from uvms_mj.render import _labels_overlay, _nice_length
+    from uvms_mj.analysis.render import _labels_overlay, _nice_length
 
     plain = next(iter(render_frames(run, fps=10, size=SIZE, labels=False)))[1].copy()
     labelled = next(iter(render_frames(run, fps=10, size=SIZE)))[1].copy()
@@ -222,7 +222,7 @@ def test_labels_scale_bar_and_name(run) -> None:
 
 
 def test_compare_video_side_by_side(run, tmp_path: Path) -> None:
-    from uvms_mj.render import render_compare_video
+    from uvms_mj.analysis.render import render_compare_video
 
     other = PaperExperiment(duration=1.0, cruise_speed=0.3, controller="rac").run()  # shorter
     out = tmp_path / "ab.mp4"

@@ -18,15 +18,15 @@ import pytest
 import yaml
 
 import uvms_mj  # noqa: F401  (registers the plugins)
-from uvms_mj.controllers import create
-from uvms_mj.experiment import metrics
-from uvms_mj.loop import SensorModel, run_closed_loop
-from uvms_mj.nominal_robot import JointTrajectory, NominalRobot
-from uvms_mj.params import ParameterError
+from uvms_mj.control import create
+from uvms_mj.sim.experiment import metrics
+from uvms_mj.sim.loop import SensorModel, run_closed_loop
+from uvms_mj.control.nominal import JointTrajectory, NominalRobot
+from uvms_mj.plant.params import ParameterError
 from uvms_mj.physics import model as pm
-from uvms_mj.robot import InitialState, Layout, RobotPlant, compile_robot_spec, quat_from_rpy, robot_path, rpy_from_quat
-from uvms_mj.scenario import ScenarioError, load_scenario, run_scenario, validate_scenario
-from uvms_mj.thrusters import CurveInverse, allocation_matrix, invert_curve, thruster_curves
+from uvms_mj.plant.robot import InitialState, Layout, RobotPlant, compile_robot_spec, quat_from_rpy, robot_path, rpy_from_quat
+from uvms_mj.scenario.schema import ScenarioError, load_scenario, run_scenario, validate_scenario
+from uvms_mj.physics.thrusters import CurveInverse, allocation_matrix, invert_curve, thruster_curves
 
 REPO = Path(__file__).resolve().parents[1]
 G = 9.81

@@ -18,10 +18,10 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from uvms_mj.loop import RunResult
-from uvms_mj.params import ParameterError
-from uvms_mj.recorder import McapRecorder, iter_messages, log_info, read_log
-from uvms_mj.robot import RobotPlant
+from uvms_mj.sim.loop import RunResult
+from uvms_mj.plant.params import ParameterError
+from uvms_mj.io.recorder import McapRecorder, iter_messages, log_info, read_log
+from uvms_mj.plant.robot import RobotPlant
 
 T = 1 / 60  # s, the sample period
 DURATION = 2.0  # s
@@ -248,8 +248,8 @@ def test_robot_without_arm_or_tip(tmp_path) -> None:
 
 
 def test_paper_log_keeps_its_channels(tmp_path) -> None:
-    from uvms_mj.experiment import PaperExperiment
-    from uvms_mj.nominal import params_from_file
+    from uvms_mj.sim.experiment import PaperExperiment
+    from uvms_mj.planar.nominal import params_from_file
 
     run = PaperExperiment(duration=0.5).run()
     path = tmp_path / "paper.mcap"
@@ -262,7 +262,7 @@ def test_paper_log_keeps_its_channels(tmp_path) -> None:
 
 def test_recorder_rejects_bad_models(tmp_path, alpha) -> None:
     plant = alpha[0]
-    from uvms_mj.nominal import params_from_file
+    from uvms_mj.planar.nominal import params_from_file
 
     with pytest.raises(ValueError, match="not both"):
         McapRecorder(tmp_path / "a.mcap", params_from_file(), model=plant.model)
@@ -279,7 +279,7 @@ def test_recorder_rejects_bad_models(tmp_path, alpha) -> None:
 
 
 def test_attitude_error_matches_mujoco() -> None:
-    from uvms_mj.plots import attitude_error
+    from uvms_mj.analysis.plots import attitude_error
 
     rng = np.random.default_rng(3)
     qd, q = rng.normal(size=(20, 4)), rng.normal(size=(20, 4))
@@ -294,7 +294,7 @@ def test_attitude_error_matches_mujoco() -> None:
 
 
 def test_interp_qpos_quaternions() -> None:
-    from uvms_mj.render import interp_qpos
+    from uvms_mj.analysis.render import interp_qpos
 
     half = np.radians(30.0) / 2
     q1 = np.r_[1.0, 2.0, 3.0, np.cos(half), 0.0, 0.0, np.sin(half), 0.5]
@@ -321,7 +321,7 @@ def _robot_pixels(frame: np.ndarray) -> np.ndarray:
 
 @pytest.mark.parametrize("camera", ["follow_three_quarter", "follow_side"])
 def test_follow_cameras_keep_the_vehicle_in_view(recorded, camera) -> None:
-    from uvms_mj.render import render_frames
+    from uvms_mj.analysis.render import render_frames
 
     log = read_log(recorded[0])
     assert np.linalg.norm(log.signals["q_true"][-1, :3] - log.signals["q_true"][0, :3]) > 0.1  # it moved
@@ -335,7 +335,7 @@ def test_follow_cameras_keep_the_vehicle_in_view(recorded, camera) -> None:
 
 
 def test_render_video_and_compare(recorded, alpha, tmp_path) -> None:
-    from uvms_mj.render import render_compare_video, render_video
+    from uvms_mj.analysis.render import render_compare_video, render_video
 
     log = read_log(recorded[0])
     info = render_video(log, tmp_path / "a.mp4", fps=4, size=(160, 120), max_seconds=0.5)
@@ -351,7 +351,7 @@ def test_render_video_and_compare(recorded, alpha, tmp_path) -> None:
 
 
 def test_render_robot_without_tip(tmp_path) -> None:
-    from uvms_mj.render import render_frames
+    from uvms_mj.analysis.render import render_frames
 
     _, run, _ = _simulate("bluerov2_heavy", duration=0.5, optional=False)
     frames = [f.copy() for _, f in render_frames(run, fps=2, size=(160, 120), labels=False, clock=False)]
@@ -359,7 +359,7 @@ def test_render_robot_without_tip(tmp_path) -> None:
 
 
 def test_cli_render_camera(recorded, tmp_path) -> None:
-    from uvms_mj.cli import main
+    from uvms_mj.cli.main import main
 
     out = tmp_path / "cli.mp4"
     res = CliRunner().invoke(main, ["render", str(recorded[0]), "--camera", "follow_side", "--fps", "1",
@@ -374,7 +374,7 @@ def test_cli_render_camera(recorded, tmp_path) -> None:
 
 
 def test_plots_with_and_without_optional_signals(recorded, alpha, tmp_path) -> None:
-    from uvms_mj.plots import plot_comparison, plot_run
+    from uvms_mj.analysis.plots import plot_comparison, plot_run
 
     full = read_log(recorded[0])
     bare = _bare(alpha[1])
@@ -390,7 +390,7 @@ def test_plots_with_and_without_optional_signals(recorded, alpha, tmp_path) -> N
 
 
 def test_robot_model_file_fallbacks(alpha) -> None:
-    from uvms_mj.render import _robot_file
+    from uvms_mj.analysis.render import _robot_file
 
     robot = dict(alpha[1].meta["robot"], path="/nonexistent/bluerov2_alpha.xml")
     assert _robot_file(robot, None).name == "bluerov2_alpha.xml"  # the built-in of that name

@@ -11,12 +11,12 @@ import numpy as np
 import pytest
 import yaml
 
-from uvms_mj.controllers import available
-from uvms_mj.experiment import PAPER_TIP_DISPLACEMENT, PaperExperiment, truth_overrides
-from uvms_mj.loop import SensorModel
-from uvms_mj.nominal import params_from_file
-from uvms_mj.plant import Plant
-from uvms_mj.scenario import (
+from uvms_mj.control import available
+from uvms_mj.sim.experiment import PAPER_TIP_DISPLACEMENT, PaperExperiment, truth_overrides
+from uvms_mj.sim.loop import SensorModel
+from uvms_mj.planar.nominal import params_from_file
+from uvms_mj.plant.plant import Plant
+from uvms_mj.scenario.schema import (
     Scenario,
     ScenarioError,
     build,
@@ -307,7 +307,7 @@ def test_sink_and_progress_are_called():
 
 
 def test_plugin_controllers_are_validated_by_their_own_errors(monkeypatch):
-    from uvms_mj.controllers import ControllerError, base
+    from uvms_mj.control import ControllerError, base
 
     class Toy(base.Controller):
         def __init__(self, trajectory, nominal=None, T=1 / 60, gain=1.0, **extra):

@@ -1,4 +1,4 @@
-"""Sim-to-real (uvms_mj.sim2real, uvms_mj.identify, ``uvms-mj sim2real`` / ``identify``).
+"""Sim-to-real (uvms_mj.analysis.sim2real, uvms_mj.analysis.identify, ``uvms-mj sim2real`` / ``identify``).
 
 Truths: synthetic signals with a known shift, known RMS and known settled changes (the metrics);
 a closed loop for the identification (attitudes simulated by the model itself with known
@@ -21,10 +21,10 @@ import pytest
 from click.testing import CliRunner
 
 import uvms_mj  # noqa: F401  (registers the plugins)
-from uvms_mj import sim2real as s2r
-from uvms_mj.cli import main
-from uvms_mj.identify import identify, nominal_values, overrides_for, write_overrides
-from uvms_mj.trials import ImuData, load_trials
+from uvms_mj.analysis import sim2real as s2r
+from uvms_mj.cli.main import main
+from uvms_mj.analysis.identify import identify, nominal_values, overrides_for, write_overrides
+from uvms_mj.analysis.trials import ImuData, load_trials
 
 from test_trials import REAL, needs_real
 
@@ -145,7 +145,7 @@ def test_identification_recovers_known_parameters(excerpt):
 
 
 def test_folds_are_disjoint_deterministic_and_cover_every_trial():
-    from uvms_mj.identify import folds
+    from uvms_mj.analysis.identify import folds
 
     names = ["b", "a", "d", "c", "e"]
     parts = folds(names, 2)
@@ -280,7 +280,7 @@ def test_excerpt_is_a_byte_copy_of_the_real_files():
 def test_every_real_trial_replays_with_tracking_below_the_limit():
     ts = load_trials(REAL)
     assert len(ts) == 18 and not ts.skipped
-    from uvms_mj.identify import run_trials
+    from uvms_mj.analysis.identify import run_trials
 
     res = run_trials(list(ts), cfg=FAST)
     for name, (_, sc) in res.items():

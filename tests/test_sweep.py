@@ -1,4 +1,4 @@
-"""Parameter sweeps (uvms_mj.sweep, `uvms-mj sweep`): spec parsing, reproducible sampling,
+"""Parameter sweeps (uvms_mj.analysis.sweep, `uvms-mj sweep`): spec parsing, reproducible sampling,
 parallel runs with a results table and figures, resume, failures, the Ray engine."""
 
 from __future__ import annotations
@@ -12,9 +12,9 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-from uvms_mj import sweep as sw
-from uvms_mj.cli import main
-from uvms_mj.sweep import Grid, Random, Scale, SweepError, Vector, parse_spec, parse_vary, plan_sweep, run_sweep
+from uvms_mj.analysis import sweep as sw
+from uvms_mj.cli.main import main
+from uvms_mj.analysis.sweep import Grid, Random, Scale, SweepError, Vector, parse_spec, parse_vary, plan_sweep, run_sweep
 
 SCENARIOS = Path(__file__).resolve().parents[1] / "scenarios"
 PAPER = str(SCENARIOS / "paper.yaml")
@@ -154,7 +154,7 @@ def test_sampling_is_reproducible_and_paired():
     # KEY[i]: the other component keeps the scenario's value
     assert s0.values["plant.current"] == [s0.draws["plant.current[0]"], 0.0]
     # the run's --set arguments reproduce it with `uvms-mj run`
-    from uvms_mj.scenario import load_scenario, resolved
+    from uvms_mj.scenario.schema import load_scenario, resolved
 
     sc = load_scenario(PAPER, s0.sets)
     assert sw._run_key(resolved(sc)) == s0.key
@@ -332,7 +332,7 @@ def test_sigterm_keeps_finished_runs_for_resume(tmp_path):
 
     out = tmp_path / "t"
     vary = ["plant.current[0]=uniform(0, 0.1)"]
-    cmd = [sys.executable, "-m", "uvms_mj.cli", "sweep", PAPER, "--vary", vary[0], "--n", "20", "--workers", "2",
+    cmd = [sys.executable, "-m", "uvms_mj.cli.main", "sweep", PAPER, "--vary", vary[0], "--n", "20", "--workers", "2",
            "--out", str(out)]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:

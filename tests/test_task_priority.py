@@ -1,4 +1,4 @@
-"""``task_priority`` (uvms_mj.controllers.task_priority): the priority property of the reference
+"""``task_priority`` (uvms_mj.control.task_priority): the priority property of the reference
 velocity against an independent constrained least-squares solution, the exact null-space
 projectors, an exact hold in still water with plant = nominal, bounded tracking of a small
 circle on bluerov2_alpha, parameter errors."""
@@ -11,13 +11,13 @@ import numpy as np
 import pytest
 from scipy.linalg import null_space
 
-from uvms_mj.controllers.base import ControllerError, Measurement, available, create
-from uvms_mj.controllers.task_priority import null_space_projector, task_priority_velocity
-from uvms_mj.loop import SensorModel, run_closed_loop
-from uvms_mj.nominal_robot import NominalRobot
-from uvms_mj.robot import InitialState, RobotPlant
-from uvms_mj.trajectories import Shifted as _Shifted
-from uvms_mj.trajectories import Circle
+from uvms_mj.control.base import ControllerError, Measurement, available, create
+from uvms_mj.control.task_priority import null_space_projector, task_priority_velocity
+from uvms_mj.sim.loop import SensorModel, run_closed_loop
+from uvms_mj.control.nominal import NominalRobot
+from uvms_mj.plant.robot import InitialState, RobotPlant
+from uvms_mj.control.trajectories import Shifted as _Shifted
+from uvms_mj.control.trajectories import Circle
 
 ROBOT = "bluerov2_alpha"
 T = 0.02

@@ -1,8 +1,8 @@
-"""Thruster allocation for any layout (uvms_mj.thrusters) against independent truths.
+"""Thruster allocation for any layout (uvms_mj.physics.thrusters) against independent truths.
 
 Truths: MuJoCo's own generalized actuator forces (qfrc_actuator of a free body), the columns
 d_i, r_i x d_i computed by hand from docs (platform-3d.md), the paper robot's 3x3 matrix and
-allocator (uvms_mj.allocation), an exhaustive enumeration of active sets of the box-constrained
+allocator (uvms_mj.planar.allocation), an exhaustive enumeration of active sets of the box-constrained
 least squares (exact, finite: every thruster free, at its lower or at its upper limit), the KKT
 conditions, and the thrust curves evaluated forwards.
 """
@@ -15,11 +15,11 @@ import mujoco
 import numpy as np
 import pytest
 
-from uvms_mj.allocation import Allocator as PlanarAllocator
-from uvms_mj.allocation import allocation_matrix as planar_matrix
-from uvms_mj.nominal import NominalModel
-from uvms_mj.plant import default_model_path
-from uvms_mj.thrusters import (Allocator, ThrustCurve, allocation_matrix, invert_curve, thrust_commands,
+from uvms_mj.planar.allocation import Allocator as PlanarAllocator
+from uvms_mj.planar.allocation import allocation_matrix as planar_matrix
+from uvms_mj.planar.nominal import NominalModel
+from uvms_mj.plant.plant import default_model_path
+from uvms_mj.physics.thrusters import (Allocator, ThrustCurve, allocation_matrix, invert_curve, thrust_commands,
                                thruster_curves)
 
 T200 = "poly 0 8.9 0 176.0 0 -404.1 0 389.9 0 -140.3"  # platform-3d.md, von Benzon et al. 2022

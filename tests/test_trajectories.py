@@ -1,4 +1,4 @@
-"""Desired 3-D end-effector trajectories (uvms_mj.trajectories) against independent truths.
+"""Desired 3-D end-effector trajectories (uvms_mj.control.trajectories) against independent truths.
 
 Truths: central finite differences of the position, closed forms (circle speed and centripetal
 acceleration, helix pitch, minimum-jerk peak speed, the lemniscate of Gerono's implicit equation
@@ -13,7 +13,7 @@ import math
 import numpy as np
 import pytest
 
-from uvms_mj.trajectories import (
+from uvms_mj.control.trajectories import (
     Circle,
     CsvTrajectory,
     Helix,
@@ -25,7 +25,7 @@ from uvms_mj.trajectories import (
     min_jerk,
     write_csv,
 )
-from uvms_mj.trajectory import StraightLine
+from uvms_mj.planar.trajectory import StraightLine
 
 EPS = np.finfo(float).eps
 
@@ -432,7 +432,7 @@ def test_bad_bc_type(tmp_path) -> None:
 def test_scalar_time_paths_equal_the_vectorised_ones():
     """The per-sample (float t) fast paths of Waypoints and the phase curves give the vectorised
     formulas' values bit for bit (before, during and after the ramps and segments)."""
-    from uvms_mj.trajectories import Circle, Lemniscate, Waypoints
+    from uvms_mj.control.trajectories import Circle, Lemniscate, Waypoints
 
     trs = [Circle(centre=(0, 0, 0), radius=0.05, normal=(1, 0, 0), period=20, t_ramp=5, t_start=2),
            Circle(centre=(0, 0, 0), radius=0.05, normal=(0, 0, 1), period=7),

@@ -1,4 +1,4 @@
-"""Recorded trials (uvms_mj.trials) and the hydrostatic static check (uvms_mj.hydrostatics).
+"""Recorded trials (uvms_mj.analysis.trials) and the hydrostatic static check (uvms_mj.analysis.hydrostatics).
 
 Truths: the raw CSV text (a known row of a real file), hand-made synthetic folders (the expected
 de-duplication and the file:line of each defect), and for the equilibrium a hand computation on
@@ -18,10 +18,10 @@ import pytest
 
 import uvms_mj  # noqa: F401  (registers the plugins)
 from uvms_mj.physics import load_model
-from uvms_mj.trials import JOINT_NAMES, load_trials, lowpass, roll_pitch_yaw
+from uvms_mj.analysis.trials import JOINT_NAMES, load_trials, lowpass, roll_pitch_yaw
 
 pytest.importorskip("scipy")
-from uvms_mj.hydrostatics import equilibrium_attitude, hydrostatic_moment, static_check  # noqa: E402
+from uvms_mj.analysis.hydrostatics import equilibrium_attitude, hydrostatic_moment, static_check  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 MODEL = REPO / "models" / "hinsdale2023.xml"

@@ -22,13 +22,13 @@ if _sys.argv and _os.path.basename(_sys.argv[0]) == "uvms-mj":
 
 # Without a display and without a user choice, pick a headless OpenGL backend (MUJOCO_GL)
 # before anything imports mujoco; with a display, or MUJOCO_GL set, nothing changes (render.py).
-from .render import configure_gl as _configure_gl
+from uvms_mj.analysis.render import configure_gl as _configure_gl
 
 _configure_gl()
 
 import warnings as _warnings
 
-from .physics import build as _build
+from uvms_mj.physics import build as _build
 
 # Register the uvms MuJoCo plugins (hydrodynamics, thrusters) with MuJoCo: after this, plain
 # MuJoCo loads and simulates any model file that uses them. Without a C compiler: one line, and
@@ -37,10 +37,10 @@ if not _build.register_plugins() and _build._mode() != "off":
     _warnings.warn(f"uvms_mj: the C plugins are unavailable ({_build.unavailable_reason()}); "
                    "using the numpy reference hydrodynamics (slower)", RuntimeWarning, stacklevel=2)
 
-from .kinematics import ArmGeometry
-from .hydro import HydroModel, HydroTerms, strip_integrals
-from .params import ParameterError, RobotParams, read_params
-from .plant import DivergenceError, Energy, Plant, default_model_path, models_dir
+from uvms_mj.planar.kinematics import ArmGeometry
+from uvms_mj.planar.hydro import HydroModel, HydroTerms, strip_integrals
+from uvms_mj.plant.params import ParameterError, RobotParams, read_params
+from uvms_mj.plant.plant import DivergenceError, Energy, Plant, default_model_path, models_dir
 
 __all__ = [
     "ArmGeometry",

@@ -10,8 +10,8 @@
   tests; :mod:`.python_backend` serves it through ``mjcb_passive``.
 """
 
-from .build import PluginUnavailableError, register_plugins, unavailable_reason
-from .model import HydroInfo, ModelError, compile_spec, hydro_of, load_model, load_spec
+from uvms_mj.physics.build import PluginUnavailableError, register_plugins, unavailable_reason
+from uvms_mj.physics.model import HydroInfo, ModelError, compile_spec, hydro_of, load_model, load_spec
 
 __all__ = [
     "HydroInfo",

@@ -207,7 +207,7 @@ def register_plugins() -> bool:
 # --------------------------------------------------------------------------- compiled fast paths
 
 #: The switch of the compiled fast paths that are not MuJoCo plugins (the RAC kernel,
-#: :mod:`uvms_mj.controllers.kernel`; the plant's sample, :mod:`uvms_mj.physics.plant_io`):
+#: :mod:`uvms_mj.control.kernel`; the plant's sample, :mod:`uvms_mj.physics.plant_io`):
 #: ``auto`` (default) builds and uses them, ``off`` keeps their Python code.
 ENV_KERNEL = "UVMS_MJ_KERNEL"
 KERNEL_MODES = ("auto", "off")

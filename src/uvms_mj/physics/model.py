@@ -23,7 +23,8 @@ from typing import Any
 
 import mujoco
 
-from . import build, config
+from uvms_mj.physics import build
+from uvms_mj.physics import config
 
 WATER, HYDRO, THRUSTER = "uvms.water", "uvms.hydro", "uvms.thruster"
 PLUGINS = (WATER, HYDRO, THRUSTER)

@@ -1,10 +1,10 @@
 """One control sample of a plant's input and output, compiled (``plant_io.c``).
 
-:meth:`uvms_mj.plant.Plant.step_observe` (n steps, the divergence checks, the new state) runs
+:meth:`uvms_mj.plant.plant.Plant.step_observe` (n steps, the divergence checks, the new state) runs
 through :func:`library` when it can: the same steps and numbers as its Python code (the
 reference, used with ``UVMS_MJ_KERNEL=off``, without a C compiler or on the Python hydrodynamics
 backend), in one call instead of a dozen numpy and MuJoCo calls. Built and loaded like the RAC
-kernel (:mod:`uvms_mj.controllers.kernel`), by :class:`uvms_mj.physics.build.CompiledOnce`.
+kernel (:mod:`uvms_mj.control.kernel`), by :class:`uvms_mj.physics.build.CompiledOnce`.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import build
+from uvms_mj.physics import build
 
 SOURCE = Path(__file__).resolve().parent / "plant_io.c"
 

@@ -17,7 +17,7 @@ dispatches on the mjData address to the handler that serves it; every other mode
 left untouched. While any data is served, every model's passive stage calls into Python (which
 also serialises multi-threaded rollouts on the GIL); the callback is removed when nothing is
 served any more. The Gauss-Markov current is advanced by :meth:`Served.advance`, which the owner
-(the :class:`uvms_mj.plant.Plant`) calls after every ``mj_step``; plain ``mj_step`` on such data
+(the :class:`uvms_mj.plant.plant.Plant`) calls after every ``mj_step``; plain ``mj_step`` on such data
 keeps the current of the last sample.
 """
 
@@ -32,8 +32,8 @@ from typing import Callable
 import mujoco
 import numpy as np
 
-from . import reference
-from .model import HydroInfo
+from uvms_mj.physics import reference
+from uvms_mj.physics.model import HydroInfo
 
 _PASSIVE_CFUNC = ctypes.CFUNCTYPE(None, ctypes.c_void_p, ctypes.c_void_p)
 _HANDLERS: dict[int, Callable[[], None]] = {}  # mjData address -> handler

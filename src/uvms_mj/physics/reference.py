@@ -30,7 +30,7 @@ from typing import Mapping
 import mujoco
 import numpy as np
 
-from .config import BodyHydro, WaterParams, resolve
+from uvms_mj.physics.config import BodyHydro, WaterParams, resolve
 
 _MASK = (1 << 64) - 1
 

@@ -1,0 +1,1 @@
+"""What reads logs and models: metrics, plots, video, sweeps, sim2real."""

@@ -1,0 +1,755 @@
+"""``rac`` and ``rac_dob``: the paper's digital RAC and disturbance observer for any robot.
+
+One implementation for the paper's planar robot and for any floating vehicle with an arm
+(``robots = "floating"``). Its nominal model is its own MuJoCo model
+(:class:`uvms_mj.control.nominal.NominalRobot`: the robot FILE with nominal parameters, still
+water, never the plant), evaluated at the measured state with MuJoCo's functions: ``mj_fullM``
+and ``qfrc_bias - qfrc_passive`` for Eqs. 6, 7 and 13, ``mj_jacBody`` / ``mj_jacSite`` for the
+task Jacobian. The planar closed form (:mod:`uvms_mj.planar.nominal`, controllers ``rac_planar`` and
+``rac_dob_planar``) stays only as the test oracle: on the paper's robot both give the same run.
+
+Task (the paper's p = (x0, pe), Eq. 1, generalised):
+
+* planar base (slides and a hinge, the paper): p = (base joint coordinates, tip position along
+  the base's slide axes); the base rows of J are the identity on the base dofs;
+* floating base (free joint): p = (vehicle origin position [world], vehicle orientation, tip
+  position [world] and, with ``tip_orientation``, tip orientation). Orientation errors are
+  rotation vectors in WORLD axes, e = log(R_d R^T) (so e is the rotation taking the measured
+  attitude to the desired one, and p_dot = omega in world axes): exact for any error angle below
+  pi, equal to the paper's angle difference in the plane. The base rows of J map qvel (linear
+  world, angular body) to (v, R omega).
+
+Digital RAC (Eqs. 10-11), J_dot by backward difference (Eq. 9), then (block form of Eq. 9)
+
+    q_ddot_B = S_B^-1 rhs_B                       (S_B: the base rows on the base dofs)
+    q_ddot_M = B# (rhs_T - J_TB q_ddot_B) + (I - B# B) q_ddot_0,    rhs = a_d - J_dot q_dot
+
+with B = J_TM the arm Jacobian (tip rows, arm dofs). Square B (the paper): B# = B^-1, or damped
+least squares below ``dls_threshold`` of the manipulability. Redundant arm (more joints than tip
+rows): the weighted pseudo-inverse B# = W^-1 B^T (B W^-1 B^T + mu^2 I)^-1 with W = the nominal
+arm inertia M_MM (dynamically consistent; the null-space motion does not load the task), and a
+null-space posture term q_ddot_0 = k_null (q_rest - q) - d_null q_dot on the arm joints,
+q_rest the initial angles. Eq. 12 moves the base's desired position while the manipulability
+sqrt(det(B B^T)) (= |det B| for the paper's square B) is below ``js``. Inputs (Eqs. 13-15)
+by computed torque on the nominal model; the observer (Eqs. 14-15 corrected, Fig. 3(b)) acts on
+the base's generalized force (planar: world fx, fy, tau0; free joint: world force, body
+moment: MuJoCo's free-joint dofs). The base force goes to the thrusters as a body-frame wrench
+(``allocation``: "clip" -- least squares then clipped to the limits, the paper code's -- or
+"wls", :class:`uvms_mj.physics.thrusters.Allocator`, weighted least squares with redistribution; "auto":
+clip for a square allocation, wls otherwise).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import mujoco
+import numpy as np
+
+from uvms_mj.control.nominal import NominalRobot
+from uvms_mj.physics.thrusters import Allocator
+from uvms_mj.control.base import Command, Controller, ControllerError, Measurement, check_positive, register
+from uvms_mj.control.builtin import (
+    PAPER_JS,
+    PAPER_T,
+    PAPER_TF,
+    LowPassZOH,
+    SingularHandler,
+    check_rac_settings,
+)
+from uvms_mj.rotations import mat_to_quat, quat_to_mat, rotation_log
+
+#: Samples of desired tip positions evaluated at once (:meth:`RAC._tip_k`).
+TIP_BLOCK = 600
+#: Samples of the compiled kernel's results held in one array (:meth:`RAC._result_row`).
+RESULTS_CHUNK = 600
+
+#: Default gains per task block (the paper's Gamma = Lambda = diag(0.3, 0.3, 0.2, 0.2, 0.2) on
+#: its planar task: 0.3 for the base position, 0.2 for the base rotation and the tip).
+GAIN_BASE_POSITION, GAIN_BASE_ROTATION, GAIN_TIP = 0.3, 0.2, 0.2
+
+
+def small_inv(A: np.ndarray) -> np.ndarray:
+    """Inverse of a 1x1, 2x2 or 3x3 matrix in closed form (adjugate / determinant; numpy's
+    LAPACK call costs more than the arithmetic at these sizes), else ``numpy.linalg.inv``.
+
+    Raises:
+        numpy.linalg.LinAlgError: singular matrix (determinant exactly 0)."""
+    n = A.shape[0]
+    if n > 3:
+        return np.linalg.inv(A)
+    if n == 1:
+        if A[0, 0] == 0:
+            raise np.linalg.LinAlgError("Singular matrix")
+        return np.array([[1.0 / A[0, 0]]])
+    if n == 2:
+        (a, b), (c, d) = A.tolist()
+        det = a * d - b * c
+        if det == 0:
+            raise np.linalg.LinAlgError("Singular matrix")
+        return np.array([[d / det, -b / det], [-c / det, a / det]])
+    (a, b, c), (d, e, f), (g, h, i) = A.tolist()
+    co = [e * i - f * h, f * g - d * i, d * h - e * g]
+    det = a * co[0] + b * co[1] + c * co[2]
+    if det == 0:
+        raise np.linalg.LinAlgError("Singular matrix")
+    return np.array([[co[0], c * h - b * i, b * f - c * e],
+                     [co[1], a * i - c * g, c * d - a * f],
+                     [co[2], b * g - a * h, a * e - b * d]]) / det
+
+
+def small_det(A: np.ndarray) -> float:
+    """Determinant of a 1x1, 2x2 or 3x3 matrix in closed form, else ``numpy.linalg.det``."""
+    n = A.shape[0]
+    if n == 1:
+        return float(A[0, 0])
+    if n == 2:
+        return float(A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0])
+    if n == 3:
+        (a, b, c), (d, e, f), (g, h, i) = A.tolist()
+        return a * (e * i - f * h) + b * (f * g - d * i) + c * (d * h - e * g)
+    return float(np.linalg.det(A))
+
+
+def _gains(name: str, value: Any, default: np.ndarray) -> np.ndarray:
+    if value is None:
+        return default.copy()
+    arr = np.atleast_1d(np.asarray(value, dtype=float))
+    if arr.size == 1:
+        arr = np.full(default.size, float(arr[0]))
+    if arr.shape != default.shape:
+        raise ControllerError(f"{name} = {value!r} must be 1 or {default.size} numbers (the task size)")
+    for i, v in enumerate(arr):
+        if not (0.0 < v < 1.0):
+            raise ControllerError(f"{name}[{i}] = {float(v)!r} is outside the allowed range (0, 1)")
+    return arr
+
+
+def nominal_robot_from_params(nominal) -> NominalRobot:
+    """The paper robot's :class:`NominalRobot` for a planar :class:`uvms_mj.planar.nominal.NominalModel`:
+    the model file with every parameter of ``nominal.params`` written back as overrides (so a
+    NominalModel built from edited parameters gives the same MuJoCo nominal model)."""
+    from uvms_mj.plant.params import apply_overrides
+    from uvms_mj.plant.plant import models_dir
+
+    p = nominal.params
+    over: dict[str, Any] = {"water_density": p.rho}
+    for b in p.bodies:
+        over.update({f"{b.name}.mass": b.mass, f"{b.name}.inertia": b.inertia,
+                     f"{b.name}.added_mass": [b.added_mass[0], b.added_mass[1], b.added_inertia],
+                     f"{b.name}.drag_coef": list(b.drag_coef), f"{b.name}.volume": b.volume,
+                     f"{b.name}.cob": list(b.cob)})
+    ranges = {tuple(t.force_range) for t in p.thrusters}
+    if len(ranges) == 1:
+        over["thrusters.force_range"] = list(ranges.pop())
+    gx, gy = nominal.gravity
+
+    def edit(spec: mujoco.MjSpec) -> None:
+        apply_overrides(spec, over)
+        spec.option.gravity = [float(gx), float(gy), 0.0]
+
+    robot = NominalRobot(models_dir() / "uvms.xml", edit=edit)
+    if len(ranges) > 1:  # per-thruster ranges
+        for t in p.thrusters:
+            a = mujoco.mj_name2id(robot.model, mujoco.mjtObj.mjOBJ_ACTUATOR, t.name)
+            robot.model.actuator_forcerange[a] = t.force_range
+        lay = robot.layout
+        robot.thruster_lo, robot.thruster_hi = robot.model.actuator_forcerange[lay.thruster_ids].T.copy()
+    return robot
+
+
+@register("rac")
+class RAC(Controller):
+    """Digital RAC (Eqs. 10-11) with Eq. 12 and computed torque on the nominal MuJoCo model
+    (Eqs. 13, 15; no observer), for any robot (module docstring).
+
+    Args:
+        trajectory: desired tip path: any object with ``position(t)`` (world [m]; a
+            :class:`uvms_mj.planar.trajectory.StraightLine` or any :class:`uvms_mj.control.trajectories.Trajectory`),
+            ``velocity(t)`` if it has no ``cruise_velocity()``; ``orientation(t)`` with
+            ``tip_orientation``. None: hold the initial tip position. Optional
+            ``positions(ts)``: ``position`` at each time of an array, the same numbers bit for bit
+            (read in blocks of ``TIP_BLOCK`` samples; StraightLine has it).
+        robot: the controller's :class:`NominalRobot` (floating robots; given by the scenario).
+        nominal: for the paper's robot, a planar :class:`uvms_mj.planar.nominal.NominalModel` whose
+            parameters make the nominal MuJoCo model (default: the model file's).
+        T: sampling period [s] (paper 1/60).
+        gamma, lam: Gamma, Lambda (1 or task-size numbers in (0, 1); default 0.3 base position,
+            0.2 base rotation and tip: the paper's on its robot).
+        js, js_high: Eq. 12 thresholds on the manipulability (paper 0.045; js_high default js).
+        n_ramp: samples of the Eq. 12 velocity ramps (ours: 30).
+        base_reference: base desired pose: planar (x, y, phi0); floating (x, y, z, qw, qx, qy,
+            qz); default the first measurement.
+        dls_threshold, dls_damping: damped least squares below this manipulability (ours 0.01).
+        allocation: "auto" | "clip" | "wls" (module docstring).
+        tf, observer_gain, observer_input: the observer (as the paper code's).
+        tip_orientation: also control the tip's orientation (floating robots; needs 6 arm dofs
+            for full rank, else the DLS/pseudo-inverse handles the deficiency).
+        null_kp, null_kd: null-space posture gains [1/s^2, 1/s] for a redundant arm.
+        observer_arm, tf_arm: (rac_dob; our extension, off by default) the same observer
+            (Eq. 14 corrected, Fig. 3(b)) on the arm's rows, with filter time constant tf_arm
+            (default tf): f_M_hat = F(s)(u_M - f_tM + g M_MM phi_dot) - g M_MM phi_dot,
+            f_tM = M_MB x0_ddot_d + h_M, the torques clipped to the motors' ranges.
+    """
+
+    observer = False
+    robots = "floating"
+    #: Run the samples through the compiled kernel when it is available (:mod:`.kernel`; the
+    #: numbers are the Python code's to round-off). False: always the Python code below.
+    use_kernel = True
+    _ws = None
+    #: The defaults the paper's robot gets for the parameters whose default depends on the robot
+    #: (what a resolved paper scenario shows).
+    PAPER_DEFAULTS = {"gamma": [0.3, 0.3, 0.2, 0.2, 0.2], "lam": [0.3, 0.3, 0.2, 0.2, 0.2]}
+
+    def __init__(
+        self,
+        trajectory=None,
+        robot: NominalRobot | None = None,
+        nominal=None,
+        T: float = PAPER_T,
+        gamma=None,
+        lam=None,
+        js: float = PAPER_JS,
+        js_high: float | None = None,
+        n_ramp: int = 30,
+        base_reference=None,
+        dls_threshold: float = 0.01,
+        dls_damping: float = 0.01,
+        allocation: str = "auto",
+        tf: float = PAPER_TF,
+        observer_gain: str = "1/Tf",
+        observer_input: str = "allocated",
+        tip_orientation: bool = False,
+        null_kp: float = 4.0,
+        null_kd: float = 4.0,
+        arm_trajectory=None,
+        observer_arm: bool = False,
+        tf_arm: float | None = None,
+    ) -> None:
+        if robot is None:
+            from uvms_mj.planar.nominal import NominalModel
+
+            nominal = nominal if nominal is not None else NominalModel()
+            robot = nominal_robot_from_params(nominal)
+        #: the planar parameters the nominal MuJoCo model was made from (paper robot), else None
+        self.nominal = nominal
+        if not isinstance(robot, NominalRobot):
+            raise ControllerError(f"robot = {robot!r} must be a NominalRobot")
+        self.robot = robot
+        lay = robot.layout
+        if lay.tip_site < 0:
+            raise ControllerError("rac needs an end-effector site (the robot has no site named *tip; "
+                                  "set the scenario's tip_site)")
+        self.trajectory = trajectory
+        self.T = check_positive("T", T)
+        self.free = bool(lay.base_free)
+        self.tip_orientation = bool(tip_orientation)
+        if self.tip_orientation and not self.free:
+            raise ControllerError("tip_orientation applies to floating robots only")
+        m = robot.model
+        self.base_dofs = np.asarray(lay.base_dofs, dtype=int)
+        self.arm_dofs = np.array([d for d in range(m.nv) if d not in set(self.base_dofs)], dtype=int)
+        nb = self.base_dofs.size
+        if self.free:
+            self.tip_rows = np.arange(3)
+            self.lin = np.arange(3)  # base position coordinates inside the base block
+            blocks = [np.full(3, GAIN_BASE_POSITION), np.full(3, GAIN_BASE_ROTATION), np.full(3, GAIN_TIP)]
+            if self.tip_orientation:
+                blocks.append(np.full(3, GAIN_TIP))
+        else:
+            jids = [int(m.dof_jntid[d]) for d in self.base_dofs]
+            self.base_qpos = np.array([m.jnt_qposadr[j] for j in jids], dtype=int)
+            slides = [i for i, j in enumerate(jids) if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_SLIDE]
+            self.lin = np.array(slides, dtype=int)
+            mujoco.mj_kinematics(m, robot.data)
+            self.tip_rows = np.array(sorted({int(np.argmax(np.abs(robot.data.xaxis[jids[i]]))) for i in slides}),
+                                     dtype=int)
+            base_gain = np.array([GAIN_BASE_POSITION if i in slides else GAIN_BASE_ROTATION for i in range(nb)])
+            blocks = [base_gain, np.full(self.tip_rows.size, GAIN_TIP)]
+        default = np.concatenate(blocks)
+        self.ntask = default.size
+        self.nbt = 6 if self.free else nb  # base rows of the task
+        self.gamma = _gains("gamma", gamma, default)
+        self.lam = _gains("lambda", lam, default)
+        check_rac_settings(self, js, js_high, n_ramp, dls_threshold, dls_damping, tf, observer_gain, observer_input)
+        size = 7 if self.free else nb
+        self.base_reference = None if base_reference is None else np.asarray(base_reference, dtype=float)
+        if self.base_reference is not None and (self.base_reference.shape != (size,)
+                                                or not np.all(np.isfinite(self.base_reference))):
+            raise ControllerError(f"base_reference = {base_reference!r} must be {size} finite numbers")
+        self.null_kp = float(null_kp)
+        self.null_kd = float(null_kd)
+        if not (math.isfinite(self.null_kp) and self.null_kp >= 0 and math.isfinite(self.null_kd) and self.null_kd >= 0):
+            raise ControllerError(f"null_kp = {null_kp!r}, null_kd = {null_kd!r} must be finite and >= 0")
+        self.filter = LowPassZOH(self.T, self.tf, size=nb)
+        self.g = 1.0 / self.tf if observer_gain == "1/Tf" else (1.0 - self.filter.h) / self.T
+        # Our extension (off by default, not in the paper): the same observer on the arm's rows.
+        if not isinstance(observer_arm, bool):
+            raise ControllerError(f"observer_arm = {observer_arm!r} must be true or false")
+        self.observer_arm = bool(observer_arm) and self.observer
+        self.tf_arm = self.tf if tf_arm is None else check_positive("tf_arm", tf_arm)
+        n_arm = m.nv - nb
+        self.filter_arm = LowPassZOH(self.T, self.tf_arm, size=n_arm)
+        self.g_arm = 1.0 / self.tf_arm if observer_gain == "1/Tf" else (1.0 - self.filter_arm.h) / self.T
+        # thrusters: body-frame allocation on the rows the base can move
+        if allocation not in ("auto", "clip", "wls"):
+            raise ControllerError(f"allocation = {allocation!r}; allowed: auto, clip, wls")
+        B = robot.allocation()
+        robot._set(m.qpos0.copy())
+        Jb = self._base_jac(robot.jacobians())
+        self._Jb_const = None
+        if not self.free:  # the paper's base (slides, then a hinge at the origin): constant; checked
+            q1 = m.qpos0.copy()
+            q1[self.base_qpos] += np.random.default_rng(0).uniform(-1.0, 1.0, self.base_qpos.size)
+            robot._set(q1)
+            if np.allclose(self._base_jac(robot.jacobians()), Jb, rtol=0, atol=1e-12):
+                self._Jb_const = Jb.copy()
+                self._Jb_pinvT = np.linalg.pinv(Jb.T)
+            robot._set(m.qpos0.copy())
+            self._J_template = np.zeros((self.ntask, m.nv))
+            self._J_template[np.arange(nb), self.base_dofs] = 1.0
+        R0 = robot.data.xmat[lay.base_body].reshape(3, 3)
+        mob = np.vstack((R0.T @ Jb[:3], R0.T @ Jb[3:]))
+        self.wrench_rows = np.flatnonzero(np.linalg.norm(mob, axis=1) > 1e-9)
+        Bc = B[self.wrench_rows]
+        if allocation == "auto":
+            allocation = "clip" if Bc.shape[0] == Bc.shape[1] or B.shape[1] == 0 else "wls"
+        self.allocation = allocation
+        self.B = B
+        self.lo, self.hi = robot.thruster_lo, robot.thruster_hi
+        self.B_pinv = np.linalg.pinv(Bc)
+        self.allocator = (Allocator(B, self.lo, self.hi, dofs=self.wrench_rows)
+                          if allocation == "wls" and B.shape[1] else None)
+
+    # ---------------------------------------------------------------- task space
+
+    def _base_jac(self, jac: dict) -> np.ndarray:
+        """(6, nb): world linear and angular velocity of the vehicle origin per base dof."""
+        return np.vstack((jac["base_p"], jac["base_r"]))[:, self.base_dofs]
+
+    def _task(self, q: np.ndarray, jac: dict) -> tuple[np.ndarray, list[np.ndarray]]:
+        """p as (vector part, rotation matrices): planar (base coords, tip rows); floating
+        (base position, tip position; rotations R_base [, R_tip])."""
+        if self.free:
+            a = self.robot.layout.base_qadr
+            vec = np.concatenate((q[a:a + 3], jac["tip"]))
+            rots = [quat_to_mat(q[a + 3:a + 7])] + ([jac["R_tip"]] if self.tip_orientation else [])
+            return vec, rots
+        return np.concatenate((q[self.base_qpos], jac["tip"][self.tip_rows])), []
+
+    def _diff(self, a: tuple, b: tuple) -> np.ndarray:
+        """a - b in the task space (rotation parts: log(R_a R_b^T), world axes)."""
+        (va, ra), (vb, rb) = a, b
+        if not self.free:
+            return va - vb
+        out = np.empty(self.ntask)
+        out[0:3] = va[0:3] - vb[0:3]
+        out[3:6] = 0.0 if ra[0] is rb[0] else rotation_log(ra[0] @ rb[0].T)  # same desired attitude: 0
+        out[6:9] = va[3:6] - vb[3:6]
+        if self.tip_orientation:
+            out[9:12] = 0.0 if ra[1] is rb[1] else rotation_log(ra[1] @ rb[1].T)
+        return out
+
+    def _jacobian(self, jac: dict) -> np.ndarray:
+        if self.free:
+            rows = [jac["base_p"], jac["base_r"], jac["tip_p"]] + ([jac["tip_r"]] if self.tip_orientation else [])
+            return np.vstack(rows)
+        J = self._J_template.copy()  # base rows: the identity on the base dofs
+        J[self.base_dofs.size:] = jac["tip_p"][self.tip_rows]
+        return J
+
+    def _desired(self, k: int) -> tuple[np.ndarray, list[np.ndarray]]:
+        """p_d(k): base reference plus the Eq. 12 offset, and the tip path."""
+        t = k * self.T
+        off = self._base_offset[k]
+        tip = self._tip_k(k)
+        cache = self._base_d
+        if cache is None or cache[0] is not off:  # the base's desired part: new only when the offset is
+            if self.free:
+                base = self._ref_pos + off
+            else:
+                base = self._ref_pos.copy()
+                base[self.lin] += off
+            cache = self._base_d = (off, base)
+        vec = np.concatenate((cache[1], tip))
+        if self.free:
+            return vec, [self._ref_R] + ([self._tip_R_d(t)] if self.tip_orientation else [])
+        return vec, []
+
+    def _tip_k(self, k: int) -> np.ndarray:
+        """The desired tip at sample k (:meth:`_tip_d` at t = k T): read from blocks of
+        ``TIP_BLOCK`` samples where the trajectory has ``positions(ts)`` (position at each time,
+        the same numbers bit for bit, e.g. :meth:`uvms_mj.planar.trajectory.StraightLine.positions`)."""
+        blk = self._tip_blk
+        if blk is not None and 0 <= k - blk[0] < len(blk[1]):
+            return blk[1][k - blk[0]]
+        positions = getattr(self.trajectory, "positions", None)
+        if positions is None:
+            return self._tip_d(k * self.T)
+        P = np.asarray(positions(np.arange(k, k + TIP_BLOCK) * self.T), dtype=float)  # (float(k) T, as k * T)
+        P = P[:, :3] if self.free else (P[:, self.tip_rows] if P.shape[1] == 3 else P[:, :self.tip_rows.size])
+        self._tip_blk = (k, P)
+        return P[0]
+
+    def _tip_d(self, t: float) -> np.ndarray:
+        if self.trajectory is None:
+            return self._tip0.copy()
+        p = self.trajectory.position(t)
+        if not (type(p) is np.ndarray and p.ndim == 1 and p.dtype == np.float64):
+            p = np.asarray(p, dtype=float).ravel()
+        if self.free:
+            return p[:3]
+        return p[self.tip_rows] if p.size == 3 else p[: self.tip_rows.size]
+
+    def _tip_R_d(self, t: float) -> np.ndarray:
+        tr = self.trajectory
+        if tr is not None and getattr(tr, "has_orientation", False):
+            return quat_to_mat(tr.orientation(t))
+        return self._tip_R0
+
+    def _v_event(self, k: int) -> np.ndarray:
+        tr = self.trajectory
+        if tr is None:
+            v = np.zeros(3)
+        elif hasattr(tr, "cruise_velocity"):
+            v = np.asarray(tr.cruise_velocity(), dtype=float).ravel()
+        else:
+            v = np.asarray(tr.velocity(k * self.T), dtype=float).ravel()
+        if self.free:
+            return np.resize(v, 3) if v.size != 3 else v
+        n = self.lin.size
+        return v[self.tip_rows] if v.size == 3 else v[:n]
+
+    # ---------------------------------------------------------------- interface
+
+    def reset(self, m: Measurement) -> None:
+        r, lay = self.robot, self.robot.layout
+        q = np.asarray(m.q, dtype=float)
+        qd0 = np.zeros(r.model.nv) if m.qd is None else np.asarray(m.qd, dtype=float)
+        M, _ = r.dynamics(q, qd0)
+        jac = r.jacobians()
+        self._tip0 = jac["tip"][:3].copy() if self.free else jac["tip"][self.tip_rows].copy()
+        self._tip_R0 = jac["R_tip"].copy()
+        if self.free:
+            a = lay.base_qadr
+            ref = q[a:a + 7] if self.base_reference is None else self.base_reference
+            self._ref_pos = np.array(ref[:3], dtype=float)
+            self._ref_R = quat_to_mat(ref[3:7])
+        else:
+            self._ref_pos = (q[self.base_qpos] if self.base_reference is None else self.base_reference).astype(float).copy()
+        self.arm_qadr = np.array([int(r.model.jnt_qposadr[r.model.dof_jntid[d]]) for d in self.arm_dofs], dtype=int)
+        self.q_rest = q[self.arm_qadr].copy()
+        b, a = self.base_dofs, self.arm_dofs
+        self._ix = {"bb": np.ix_(b, b), "ba": np.ix_(b, a), "ab": np.ix_(a, b), "aa": np.ix_(a, a)}
+        pos = {int(d): i for i, d in enumerate(a)}
+        self._motor_idx = np.array([pos[int(d)] for d in r.motor_dofs], dtype=int)
+        self._Jb_key = None
+        self.singular = SingularHandler(self.js, self.js_high, self.n_ramp, self._v_event,
+                                        size=3 if self.free else self.lin.size)
+        self._base_offset = {m.k: np.zeros(3 if self.free else self.lin.size)}
+        self._base_d = None  # (offset, base part of p_d) of the last _desired
+        self._tip_blk = None  # (first sample, desired tips) of _tip_k
+        self._k0 = m.k
+        self._pd_prev = self._desired(m.k)
+        self._pd_next = None
+        self._e_p_prev = np.zeros(self.ntask)
+        self._q_prev = q.copy()
+        self._p_prev = self._task(q, jac)
+        self._J_prev = self._jacobian(jac)
+        b = self.base_dofs
+        self.filter.reset(self.g * M[np.ix_(b, b)] @ qd0[b])  # f_E_hat(0) = 0
+        self.filter_arm.reset(self.g_arm * M[np.ix_(a, a)] @ qd0[a])
+        self._ws = self._kernel_workspace() if self.use_kernel else None
+
+    # ---------------------------------------------------------------- compiled samples
+
+    def _kernel_workspace(self):
+        """The compiled kernel's workspace for this run, loaded with the state that
+        :meth:`reset` set, or None where the Python code runs (no kernel, the Python hydrodynamics
+        backend, a planar base whose Jacobian is not constant, a robot beyond the kernel's sizes)."""
+        from uvms_mj.control import kernel as _k
+
+        r = self.robot
+        lib = _k.library()
+        if lib is None or getattr(r, "_served", None) is not None or (not self.free and self._Jb_const is None):
+            return None
+        m, lay = r.model, r.layout
+        nb, na = self.base_dofs.size, self.arm_dofs.size
+        ntr = self.ntask - self.nbt
+        nvec = 6 if self.free else self.ntask
+        sizes = {"nq": m.nq, "nv": m.nv, "nb": nb, "na": na, "ntask": self.ntask, "nbt": self.nbt, "ntr": ntr,
+                 "nvec": nvec, "free_base": int(self.free), "tip_orient": int(self.tip_orientation),
+                 "square": int(ntr == na), "observer": int(self.observer), "observer_arm": int(self.observer_arm),
+                 "clip_alloc": int(self.allocator is None), "alloc_input": int(self.observer_input == "allocated"),
+                 "nthr": self.B.shape[1], "nwr": self.wrench_rows.size, "nmot": self._motor_idx.size,
+                 "base_body": lay.base_body, "tip_site": lay.tip_site, "base_qadr": lay.base_qadr if self.free else 0,
+                 "wls_fast": 0, "nbv": self._ref_pos.size, "nlin": self.lin.size}
+        if max(m.nv, self.ntask, na, nb) > _k.MAXN:
+            return None
+        params = {"T": self.T, "dls_threshold": self.dls_threshold, "dls_damping": self.dls_damping,
+                  "null_kp": self.null_kp, "null_kd": self.null_kd, "g": self.g, "h": self.filter.h,
+                  "g_arm": self.g_arm, "h_arm": self.filter_arm.h}
+        index = {"base_dofs": self.base_dofs, "arm_dofs": self.arm_dofs, "tip_rows": self.tip_rows,
+                 "base_qpos": getattr(self, "base_qpos", ()), "arm_qadr": self.arm_qadr,
+                 "wrench_rows": self.wrench_rows, "motor_idx": self._motor_idx, "lin": self.lin}
+        const = {"gamma": self.gamma, "lam": self.lam, "q_rest": self.q_rest, "B": self.B, "B_pinv": self.B_pinv,
+                 "lo": self.lo, "hi": self.hi, "motor_lo": r.motor_lo, "motor_hi": r.motor_hi}
+        if not self.free:
+            const.update(Jb=self._Jb_const, Jb_pinvT=self._Jb_pinvT)
+        al = self.allocator
+        if al is not None and not al._any_equal:  # the Allocator's fast path: u = P_free S tau
+            sizes["wls_fast"] = 1
+            const["Q"] = al._P_free @ al.S
+        ws = _k.Workspace(lib, sizes, params, index, const, model=r.model, data=r.data)
+        sig = {} if self.free else {"p_desired": "pd_out", "p_measured": "p"}  # signal: kernel output, in order
+        sig.update(e_p="e_p", e_v="e_v", v_desired="v_d", a_desired="a_d", qdd_desired="qdd", u_B="u_B",
+                   u_B_applied="u_app", f_E_hat="f_e_hat")
+        # the results a sample returns, in this order: the signals above, the commands, then what
+        # _compute_kernel reads of the kernel's outputs for this robot
+        self._signal_names = tuple(sig)
+        extra = (("f_m_hat",) if self.observer_arm else ()) + (("pd_out", "base_quat", "p") if self.free else ())
+        self._result_slices = tuple(ws.slices[v] for v in (*sig.values(), "thrust", "torques", *extra))
+        self._results = None  # [next row, rows, flags, views per result] of the results chunk
+        a = ws.a
+        self._ws_views = (a["q"], a["qd_meas"], a["scalars"], a["v_base"], a["tipn"], a["sat"])
+        a["ref"][:] = self._ref_pos  # the desired points' base part: reference + Eq. 12 offset (0 now)
+        a["pd"][:] = self._pd_prev[0]  # p_d(k0) (the kernel's own from then on)
+        a["Rd"][:] = a["Rdn"][:] = self._rots(self._pd_prev[1])
+        a["q_prev"][:] = self._q_prev
+        a["p_prev"][:] = self._p_prev[0]
+        a["R_prev"][:] = self._rots(self._p_prev[1])
+        a["J_prev"][:] = self._J_prev
+        a["pd_prev"][:] = self._pd_prev[0]
+        a["Rd_prev"][:] = self._rots(self._pd_prev[1])
+        a["z"][:] = self.filter.z
+        a["z_arm"][:] = self.filter_arm.z
+        self.filter.z, self.filter_arm.z = a["z"], a["z_arm"]  # the filters' states now live in the kernel
+        return ws
+
+    @staticmethod
+    def _rots(rots: list) -> np.ndarray:
+        """Up to two rotation matrices as the kernel's 18 numbers (zeros for the missing)."""
+        out = np.zeros(18)
+        for i, R in enumerate(rots):
+            out[9 * i:9 * i + 9] = R.ravel()
+        return out
+
+    def _compute_kernel(self, m: Measurement) -> Command:
+        """One sample through the compiled kernel: the steps of :meth:`compute`'s Python code
+        (see rac_kernel.c); Eq. 12's handler, the desired tip and a "wls" allocation staying here."""
+        ws, k = self._ws, m.k
+        a_q, a_qd, sc, a_v, a_tipn, a_sat = self._ws_views
+        first = k <= self._k0
+        a_q[:] = m.q
+        has_qd = m.qd is not None
+        if has_qd:
+            a_qd[:] = m.qd
+        ws.measure(ws.ptr, first, has_qd)
+        manip = sc.item(0)
+        sh = self.singular
+        v_base = sh.update(k, manip)  # Eq. 12
+        moving = not sh.at_rest and any(v_base.tolist())  # the offset moves: off(k+1) = off(k) + T v
+        if moving:
+            a_v[:] = v_base
+        a_tipn[:] = self._tip_k(k + 1)  # p_d(k + 1): the kernel adds the base part (_desired)
+        if self.tip_orientation:
+            ws.a["Rdn"][9:] = self._tip_R_d((k + 1) * self.T).ravel()
+        rc = ws.command(ws.ptr, first, moving)
+        if rc < 0:
+            raise np.linalg.LinAlgError("Singular matrix")
+        saturated = None
+        if rc == 1:  # "wls": the Allocator
+            a = ws.a
+            res = self.allocator(a["body"][self.wrench_rows])
+            a["thrust"][:] = res.thrust
+            saturated = res.saturated
+        ws.finish(ws.ptr)
+        out = self._result_row(ws.block, a_sat if saturated is None else saturated)
+        names = self._signal_names
+        n = len(names)
+        signals = dict(zip(names, out))  # [p_desired, p_measured,] e_p ... f_E_hat
+        signals.update(manipulability=manip, singular_phase=sh.phase, dls_active=sc.item(2) != 0.0,
+                       thrust_saturated=out[-1])
+        rest = out[n + 2:-1]  # [f_m_hat,] [pd_out, base_quat, p]
+        if self.observer_arm:
+            signals["f_M_hat"] = rest.pop(0)
+        if self.free:
+            p_d, base_quat, p = rest
+            signals["base_desired"] = np.concatenate((p_d[:3], base_quat))
+            signals["tip_desired"] = p_d[3:6]
+            signals["tip_measured"] = p[3:6]
+        else:
+            signals["det_B"] = sc.item(1)
+        return Command(out[n], out[n + 1], signals)
+
+    def _result_row(self, block: np.ndarray, saturated) -> list[np.ndarray]:
+        """This sample's results as arrays of their own (the kernel's buffers are reused): the
+        kernel's output block and the thrusters' saturation flags copied into the next row of a
+        chunk of ``RESULTS_CHUNK`` samples, whose views of each result are made for the whole
+        chunk at once (a new chunk when it is full: rows are never written twice)."""
+        ch = self._results
+        if ch is None or ch[0] == RESULTS_CHUNK:
+            rows = np.empty((RESULTS_CHUNK, block.size))
+            flags = np.empty((RESULTS_CHUNK, np.size(saturated)), dtype=bool)
+            ch = self._results = [0, rows, flags, [list(rows[:, s]) for s in self._result_slices] + [list(flags)]]
+        i = ch[0]
+        ch[0] = i + 1
+        ch[1][i] = block
+        ch[2][i] = saturated  # (!= 0: True)
+        return [views[i] for views in ch[3]]
+
+    def _velocity(self, q: np.ndarray) -> np.ndarray:
+        """Backward difference of the measured coordinates as qvel (quaternions included)."""
+        qd = np.zeros(self.robot.model.nv)
+        mujoco.mj_differentiatePos(self.robot.model, qd, self.T, self._q_prev, q)
+        return qd
+
+    def compute(self, m: Measurement) -> Command:
+        if self._ws is not None:
+            return self._compute_kernel(m)
+        T, k, r = self.T, m.k, self.robot
+        q = np.asarray(m.q, dtype=float)
+        first = k <= self._k0
+        if m.qd is None:
+            qd = np.zeros(r.model.nv) if first else self._velocity(q)
+        else:
+            qd = np.asarray(m.qd, dtype=float)
+        M, h = r.dynamics(q, qd)  # nominal model at the measured state (Eqs. 6-7)
+        jac = r.jacobians()
+        J = self._jacobian(jac)
+        p = self._task(q, jac)
+        if m.qd is None:
+            pd_meas = np.zeros(self.ntask) if first else self._diff(p, self._p_prev) / T
+        else:
+            pd_meas = J @ qd
+        b, a = self.base_dofs, self.arm_dofs
+        nbt = self.nbt
+        Bm = J[nbt:][:, a]  # arm Jacobian: tip rows, arm dofs
+        if Bm.shape[0] == Bm.shape[1]:
+            detb = small_det(Bm)
+            manip = abs(detb)
+        else:
+            detb = float("nan")
+            manip = math.sqrt(max(small_det(Bm @ Bm.T), 0.0))
+
+        # Eq. 12: the base carries the arm while the manipulability is below js.
+        v_base = self.singular.update(k, manip)
+        self._base_offset[k + 1] = self._base_offset[k] + T * v_base
+
+        # p_d(k) was computed as p_d(k + 1) at the previous sample (same offset: the Eq. 12 offset
+        # of k + 1 is fixed before p_d(k + 1) is formed)
+        cached = self._pd_next
+        p_d = cached[1] if cached is not None and cached[0] == k else self._desired(k)
+        p_d_next = self._desired(k + 1)
+        self._pd_next = (k + 1, p_d_next)
+        e_p = self._diff(p_d, p)
+        v_d = (self._diff(p_d, self._pd_prev) + self.gamma * self._e_p_prev) / T  # Eq. 11
+        v_d_next = (self._diff(p_d_next, p_d) + self.gamma * e_p) / T  # Eq. 11 at k + 1
+        e_v = v_d - pd_meas
+        a_d = (v_d_next - v_d + self.lam * e_v) / T  # Eq. 10
+
+        # q_ddot_d from J q_ddot = a_d - J_dot q_dot, J_dot by backward difference (Eq. 9)
+        rhs = a_d.copy()
+        if not first:
+            rhs -= (J - self._J_prev) @ qd / T
+        qdd_d = np.zeros(r.model.nv)
+        if self.free:  # S = [[I, 0], [0, R]]: its inverse in closed form
+            qdd_d[b[:3]] = rhs[:3]
+            qdd_d[b[3:]] = jac["R_base"].T @ rhs[3:6]
+        else:  # the base rows of J are the identity on the base dofs
+            qdd_d[b] = rhs[:nbt]
+        r_m = rhs[nbt:] - J[nbt:][:, b] @ qdd_d[b]
+        dls = manip < self.dls_threshold
+        mu2 = self.dls_damping ** 2 * (1.0 - (manip / self.dls_threshold) ** 2) if dls else 0.0
+        if Bm.shape[0] == Bm.shape[1]:
+            if dls:
+                qdd_d[a] = Bm.T @ (small_inv(Bm @ Bm.T + mu2 * np.eye(Bm.shape[0])) @ r_m)
+            else:
+                qdd_d[a] = small_inv(Bm) @ r_m
+        else:
+            ix = self._ix
+            X = np.linalg.solve(M[ix["aa"]], Bm.T)  # W^-1 B^T, W = M_MM
+            G = Bm @ X
+            if mu2:
+                G = G + mu2 * np.eye(G.shape[0])
+            Bp = X @ small_inv(G)
+            q0dd = self.null_kp * (self.q_rest - q[self.arm_qadr]) - self.null_kd * qd[a]
+            qdd_d[a] = Bp @ r_m + q0dd - Bp @ (Bm @ q0dd)
+
+        # Computed torque on the nominal model (Eq. 7 blocks), Eqs. 13 and 15.
+        ix = self._ix
+        M_BB, M_BM = M[ix["bb"]], M[ix["ba"]]
+        M_MB, M_MM = M[ix["ab"]], M[ix["aa"]]
+        f_tM = M_MB @ qdd_d[b] + h[a]
+        f_m_hat = (self.filter_arm.output() - self.g_arm * M_MM @ qd[a]) if self.observer_arm else None
+        u_M = M_MM @ qdd_d[a] + f_tM + (f_m_hat if f_m_hat is not None else 0.0)
+        f_t = M_BM @ qdd_d[a] + h[b]  # Eq. 13
+        f_e_hat = self.filter.output() - self.g * M_BB @ qd[b] if self.observer else np.zeros(b.size)
+        u_B = M_BB @ qdd_d[b] + f_t + f_e_hat  # Eq. 15
+        thrust, saturated, u_applied = self._allocate(u_B, jac)
+        if self.observer:
+            # Eq. 14 corrected (Fig. 3(b)): w = u_B - f_t + g M_BB x0_dot; z(k+1) = h z + (1-h) w.
+            applied = u_applied if self.observer_input == "allocated" else u_B
+            self.filter.advance(applied - f_t + self.g * M_BB @ qd[b])
+        if self.observer_arm:
+            # the same structure on the arm rows, with the torques the motors can give
+            tau = u_M.copy()
+            tau[self._motor_idx] = np.clip(u_M[self._motor_idx], r.motor_lo, r.motor_hi)
+            self.filter_arm.advance(tau - f_tM + self.g_arm * M_MM @ qd[a])
+
+        self._pd_prev, self._e_p_prev = p_d, e_p
+        self._q_prev, self._p_prev, self._J_prev = q, p, J
+        torques = u_M[self._motor_idx]  # joint torques for the motors' joints (in the motors' order)
+        signals = {"e_p": e_p, "e_v": e_v, "v_desired": v_d, "a_desired": a_d, "qdd_desired": qdd_d,
+                   "u_B": u_B, "u_B_applied": u_applied, "f_E_hat": f_e_hat, "manipulability": manip,
+                   "singular_phase": self.singular.phase, "dls_active": dls, "thrust_saturated": saturated}
+        if f_m_hat is not None:
+            signals["f_M_hat"] = f_m_hat
+        if self.free:
+            signals["base_desired"] = np.concatenate((p_d[0][:3], mat_to_quat(p_d[1][0])))
+            signals["tip_desired"] = p_d[0][3:6].copy()
+            signals["tip_measured"] = p[0][3:6].copy()
+        else:
+            signals = {"p_desired": p_d[0], "p_measured": p[0], **signals, "det_B": detb}
+        return Command(thrust=thrust, torques=torques, signals=signals)
+
+    def _allocate(self, u_B: np.ndarray, jac: dict) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Generalized base force -> thrusts; returns (thrust, saturated, achieved base force)."""
+        R = jac["R_base"]
+        # u_B = Jb^T w (w: the world wrench at the vehicle origin); free joint: Jb = [[I, 0], [0, R]]
+        if self.free:
+            body = np.concatenate((R.T @ u_B[:3], u_B[3:]))
+            Jb = None
+        else:
+            if self._Jb_const is not None:
+                Jb = self._Jb_const
+            else:
+                Jb = self._base_jac(jac)
+                key = Jb.tobytes()
+                if key != self._Jb_key:
+                    self._Jb_key, self._Jb_pinvT = key, np.linalg.pinv(Jb.T)
+            w = self._Jb_pinvT @ u_B
+            body = np.concatenate((R.T @ w[:3], R.T @ w[3:]))
+        if self.allocator is not None:
+            res = self.allocator(body[self.wrench_rows])
+            f, sat = res.thrust, res.saturated
+        else:
+            f = self.B_pinv @ body[self.wrench_rows]
+            sat = (f < self.lo) | (f > self.hi)
+            if sat.any():
+                f = np.clip(f, self.lo, self.hi)
+        produced = self.B @ f  # body axes
+        if self.free:
+            return f, sat, np.concatenate((R @ produced[:3], produced[3:]))
+        w_out = np.concatenate((R @ produced[:3], R @ produced[3:]))
+        return f, sat, Jb.T @ w_out
+
+
+@register("rac_dob")
+class RACDOB(RAC):
+    """RAC plus the digital disturbance observer on the base (Eq. 14 corrected, Fig. 3(b)),
+    h = exp(-T / Tf), Tf = 10 s (paper), for any robot."""
+
+    observer = True

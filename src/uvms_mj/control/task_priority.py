@@ -1,0 +1,445 @@
+"""``task_priority``: task-priority kinematic control with a velocity-tracking low-level loop.
+
+The kinematic control of an underwater vehicle-manipulator system of Antonelli, *Underwater
+Robots*, 4th ed., Springer 2018, ch. 9 ("Kinematic control": task-priority inverse kinematics,
+after Nakamura, Hanafusa & Yoshikawa 1987, Siciliano & Slotine 1991 and Chiaverini 1997), for
+any floating robot with an arm (``robots = "floating"``), on the controller's own nominal MuJoCo model
+(:class:`uvms_mj.control.nominal.NominalRobot`).
+
+Frames and units. Generalized velocities zeta are MuJoCo's qvel (Antonelli's zeta = [nu; q_dot]
+with the vehicle's linear part in WORLD axes here): vehicle origin velocity v [m/s, world],
+vehicle angular velocity omega [rad/s, BODY], joint rates [rad/s]. Every task Jacobian row is in
+world axes (``mj_jacBody`` / ``mj_jacSite``). Positions [m], angles [rad], forces [N], moments
+[N m].
+
+Tasks, highest priority first (Antonelli ch. 9, "task-priority inverse kinematics"):
+
+1. end-effector position sigma_1 = p_tip (world, 3), J_1 = d p_tip / d zeta;
+2. vehicle attitude, error sigma~_2 = log(R_d R^T) (rotation vector, WORLD axes, as ``rac``),
+   J_2 = the vehicle's world angular-velocity rows (= [0 R 0]);
+3. vehicle position p_v (world, 3) and arm posture q (n joints), stacked, J_3 = [J_pv; 0 S],
+   the posture rows scaled by ``posture_weight`` (a row weight in the task-3 least squares);
+   by default (``posture_level = "below_position"``) the posture is a 4th level of its own,
+   below the vehicle position.
+
+Each task's reference velocity is the closed-loop inverse kinematics (CLIK) one (Antonelli ch. 9,
+"kinematic control", sigma_dot_r = sigma_dot_d + Lambda sigma~), on the MEASURED task values:
+
+    v_1 = p_dot_d(t) + gain_tip (p_d(t) - p_tip)
+    v_2 = gain_attitude log(R_d R^T)                       (R_d: initial attitude)
+    v_3 = [gain_position (p_v,d - p_v);  posture_weight (q_dot_d + gain_posture (q_d - q))]
+
+and the reference zeta_r by the recursive task-priority solution (``priority_form``):
+
+* "siciliano_slotine" (default; Antonelli ch. 9, the task-priority solution of Siciliano &
+  Slotine 1991, extended recursively with the augmented Jacobians):
+
+      zeta_1 = J_1^# v_1
+      zeta_i = zeta_{i-1} + (J_i N_{1..i-1})^# (v_i - J_i zeta_{i-1}),  N_{1..i} = I - J_{1..i}^+ J_{1..i}
+
+  each lower task is solved in least squares inside the null space of the higher ones (it is
+  achieved exactly when feasible, as well as possible otherwise, and never disturbs them);
+* "singularity_robust" (Chiaverini 1997, Antonelli ch. 9 "singularity-robust task priority"):
+
+      zeta_r = J_1^# v_1 + N_1 J_2^# v_2 + N_{12} J_3^# v_3
+
+  (each task inverted alone, then projected: no algorithmic singularities, lower tasks are not
+  least-squares optimal when they conflict).
+
+J_{1..i} is the stacked (augmented) Jacobian of tasks 1..i. Null-space projectors use the exact
+Moore-Penrose pseudo-inverse (SVD, singular values below ``rank_tol`` times the largest treated
+as zero), so N J = 0 and N N = N to round-off. The task solutions use a DAMPED pseudo-inverse
+(damped least squares, Antonelli ch. 9 on kinematic singularities; Nakamura & Hanafusa 1986),
+per singular value: A^# = V diag(s_i / (s_i^2 + lambda_i^2)) U^T with
+
+    lambda_i^2 = dls_damping^2 (1 - (s_i / dls_threshold)^2)   if s_i < dls_threshold, else 0
+
+(s_i in the Jacobian's own units: 1 for the vehicle's translation, m for the tip per joint rad;
+s_i <= ``rank_tol`` s_max are exact zeros, inverted as 0), so well-conditioned directions are inverted exactly and the solution stays bounded (<= 1 /
+(2 dls_damping) per unit task velocity) through a singularity.
+
+Low-level loop (Antonelli ch. 9, "kinematic control" with a dynamic low-level velocity
+controller; the vehicle's and joints' PI velocity loops of its dynamic-control chapters): the
+reference is integrated, q_r(k+1) = q_r(k) (+) T zeta_r(k) (``mj_integratePos``, q_r(0) =
+q(0)), and every dof tracks it with a PD on the reference (= a PI on the velocity error
+zeta_r - zeta):
+
+    u = Kp (q_r (-) q) + Kd (zeta_r - zeta) + h(q)
+
+(q_r (-) q: ``mj_differentiatePos``, in qvel coordinates; h(q): the nominal hold force, gravity
+minus buoyancy, the restoring-force compensation of Antonelli's dynamic control). The lead
+q_r (-) q is clamped to ``reference_lead_limit`` per dof (anti-windup: q_r is pulled back
+along). Vehicle rows of u: world force and body moment (MuJoCo's free-joint dofs), sent as the
+body wrench [R^T F; M] to the saturating allocator :class:`uvms_mj.physics.thrusters.Allocator`; joint
+rows clipped to the motors' ranges. Gains, unless given, from the nominal mass matrix M at the
+initial state: Kp_i = M_ii w_i^2, Kd_i = 2 damping_ratio w_i M_ii (a critically damped
+second-order loop per dof, as ``station_pid``), w_i = ``bandwidth_base`` /
+``bandwidth_attitude`` / ``bandwidth_joints``.
+
+Defaults. A cascade: the kinematic (outer) gains, 1/s on the tip and the attitude and 0.5/s on
+task 3, sit below the low-level (inner) bandwidths, 2 rad/s on the vehicle's translation,
+3 rad/s on its rotation, 10 rad/s on the joints (station_pid's 1, 2, 6 raised: here the loops
+track a moving reference instead of holding a fixed one); every kinematic gain must satisfy
+gain T < 1 (the sampled CLIK error e(k+1) = (1 - gain T) e(k) then decays monotonically).
+dls_threshold 0.01 and dls_damping 0.05 (Jacobian units): the damping starts where the arm's
+tip Jacobian loses two orders of magnitude against its usual 0.1 - 0.3 m/rad; rank_tol 1e-10.
+
+References are to chapter and topic; the book's equation numbers were not checked against a
+copy (the forms are the standard ones of the cited papers: Nakamura, Hanafusa & Yoshikawa 1987;
+Siciliano & Slotine 1991; Chiaverini 1997).
+
+Velocities: ``measurement.qd`` when there is a velocity sensor, else backward differences of the
+measured poses (``mj_differentiatePos`` on the nominal model; zero at the first sample).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Sequence
+
+import mujoco
+import numpy as np
+
+from uvms_mj.control.nominal import JointTrajectory, NominalRobot
+from uvms_mj.physics.thrusters import Allocator
+from uvms_mj.control.base import Command, Controller, ControllerError, Measurement, check_positive, register
+from uvms_mj.rotations import quat_to_mat, rotation_log
+from uvms_mj.control.station_pid import DEFAULT_T, station_reference
+
+#: The priority forms (module docstring).
+PRIORITY_FORMS = ("siciliano_slotine", "singularity_robust")
+#: Where the arm posture sits in the hierarchy (``posture_level``).
+POSTURE_LEVELS = ("with_position", "below_position")
+
+
+# ------------------------------------------------------------------ linear algebra
+
+
+def pinv_exact(A: np.ndarray, rank_tol: float) -> np.ndarray:
+    """Moore-Penrose pseudo-inverse by SVD; singular values <= rank_tol * s_max count as zero."""
+    A = np.atleast_2d(np.asarray(A, dtype=float))
+    if A.size == 0:
+        return np.zeros((A.shape[1], A.shape[0]))
+    U, s, Vt = np.linalg.svd(A, full_matrices=False)
+    keep = s > rank_tol * max(float(s[0]) if s.size else 0.0, 1e-300)
+    inv = np.where(keep, 1.0 / np.where(keep, s, 1.0), 0.0)
+    return (Vt.T * inv) @ U.T
+
+
+def null_space_projector(J: np.ndarray, rank_tol: float = 1e-10) -> np.ndarray:
+    """N = I - J^+ J (exact pseudo-inverse): the orthogonal projector onto ker J (Antonelli ch. 9,
+    task-priority: the null-space projector of a task). N is symmetric, N N = N and J N = 0 to
+    round-off, computed as I - V_r V_r^T from the SVD (V_r: the rank-r right singular vectors)."""
+    J = np.atleast_2d(np.asarray(J, dtype=float))
+    n = J.shape[1]
+    if J.shape[0] == 0:
+        return np.eye(n)
+    _, s, Vt = np.linalg.svd(J, full_matrices=False)
+    r = int(np.sum(s > rank_tol * max(float(s[0]), 1e-300))) if s.size else 0
+    V = Vt[:r].T
+    return np.eye(n) - V @ V.T
+
+
+def damped_pinv(A: np.ndarray, threshold: float, damping: float, rank_tol: float = 1e-10) -> tuple[np.ndarray, float]:
+    """Damped pseudo-inverse with per-singular-value variable damping (damped least squares,
+    Antonelli ch. 9 on kinematic singularities): s_i / (s_i^2 + lambda_i^2), lambda_i^2 =
+    damping^2 (1 - (s_i / threshold)^2) below ``threshold``, 0 above; singular values <=
+    rank_tol s_max count as exact zeros (inverted as 0). Returns (A^#, the largest
+    lambda^2 used on a non-zero singular value, > rank_tol s_max: a structurally zero one is
+    inverted as 0 whatever its lambda)."""
+    A = np.atleast_2d(np.asarray(A, dtype=float))
+    if A.size == 0:
+        return np.zeros((A.shape[1], A.shape[0])), 0.0
+    U, s, Vt = np.linalg.svd(A, full_matrices=False)
+    lam2 = np.where(s < threshold, damping ** 2 * (1.0 - (s / threshold) ** 2), 0.0)
+    # structurally zero singular values (<= rank_tol s_max: round-off of a rank deficiency, whose
+    # singular vectors are noise) are inverted as 0, never amplified
+    nonzero = s > rank_tol * max(float(s[0]), 1e-300)
+    den = s * s + lam2
+    inv = np.where(nonzero, s / np.where(nonzero, den, 1.0), 0.0)
+    return (Vt.T * inv) @ U.T, float(np.max(lam2[nonzero], initial=0.0))
+
+
+def task_priority_velocity(tasks: Sequence[tuple[np.ndarray, np.ndarray]], form: str = "siciliano_slotine",
+                           dls_threshold: float = 1e-2, dls_damping: float = 5e-2,
+                           rank_tol: float = 1e-10) -> dict[str, Any]:
+    """Reference velocity of prioritised tasks [(J_1, v_1), (J_2, v_2), ...] (highest first).
+
+    Returns ``zeta`` (the reference), ``levels`` (zeta after each level: levels[i] - levels[i-1]
+    is task i's correction), ``projectors`` (N_{1..i} after each level, exact) and
+    ``damping`` (the largest lambda^2 per level). Module docstring for the two forms."""
+    if form not in PRIORITY_FORMS:
+        raise ControllerError(f"priority_form = {form!r}; allowed: {', '.join(PRIORITY_FORMS)}")
+    n = np.atleast_2d(tasks[0][0]).shape[1]
+    zeta = np.zeros(n)
+    N = np.eye(n)
+    stacked = np.zeros((0, n))
+    levels, projectors, damping = [], [], []
+    for J, v in tasks:
+        J = np.atleast_2d(np.asarray(J, dtype=float))
+        v = np.asarray(v, dtype=float).ravel()
+        if form == "siciliano_slotine":
+            # zeta_i = zeta_{i-1} + (J_i N_{1..i-1})^# (v_i - J_i zeta_{i-1}) (Antonelli ch. 9)
+            A = J @ N
+            Ad, lam2 = damped_pinv(A, dls_threshold, dls_damping, rank_tol)
+            # Ad = N J^T (...) lies in range(N) (N symmetric): no effect on the higher tasks.
+            zeta = zeta + Ad @ (v - J @ zeta)
+        else:
+            # zeta_r += N_{1..i-1} J_i^# v_i (Chiaverini's singularity-robust form, Antonelli ch. 9)
+            Jd, lam2 = damped_pinv(J, dls_threshold, dls_damping, rank_tol)
+            zeta = zeta + N @ (Jd @ v)
+        stacked = np.vstack((stacked, J))
+        N = null_space_projector(stacked, rank_tol)  # N_{1..i} = I - J_{1..i}^+ J_{1..i}
+        levels.append(zeta.copy())
+        projectors.append(N.copy())
+        damping.append(lam2)
+    return {"zeta": zeta, "levels": levels, "projectors": projectors, "damping": damping}
+
+
+def _vector(name: str, value: Any, size: int) -> np.ndarray | None:
+    if value is None:
+        return None
+    try:
+        arr = np.atleast_1d(np.asarray(value, dtype=float))
+    except (TypeError, ValueError):
+        raise ControllerError(f"{name} = {value!r} must be 1 or {size} finite numbers >= 0") from None
+    if arr.size == 1:
+        arr = np.full(size, float(arr[0]))
+    if arr.shape != (size,) or not np.all(np.isfinite(arr)) or np.any(arr < 0):
+        raise ControllerError(f"{name} = {value!r} must be 1 or {size} finite numbers >= 0")
+    return arr
+
+
+def _nonneg(name: str, value: Any) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ControllerError(f"{name} = {value!r} must be a finite number >= 0") from None
+    if not (math.isfinite(v) and v >= 0):
+        raise ControllerError(f"{name} = {value!r} must be finite and >= 0")
+    return v
+
+
+def _positive(name: str, value: Any) -> float:
+    try:
+        return check_positive(name, value)
+    except (TypeError, ValueError) as exc:
+        if isinstance(exc, ControllerError):
+            raise
+        raise ControllerError(f"{name} = {value!r} must be finite and > 0") from None
+
+
+@register("task_priority")
+class TaskPriority(Controller):
+    """Task-priority kinematic control + PD-on-reference low-level loop (module docstring).
+
+    Args:
+        robot: the controller's :class:`NominalRobot` (given by the scenario; never the plant).
+        trajectory: desired tip path, any object with ``position(t)`` and ``velocity(t)``
+            (world [m], [m/s]; :mod:`uvms_mj.control.trajectories`); None: hold the initial tip.
+        arm_trajectory: desired arm posture of task 3 (None: the initial angles).
+        T: controller period [s].
+        gain_tip: Lambda_1 of the tip task [1/s].
+        gain_attitude: Lambda_2 of the vehicle attitude task [1/s].
+        gain_position: Lambda_3 of the vehicle position hold [1/s].
+        gain_posture: Lambda_3 of the arm posture [1/s].
+        posture_weight: weight of the posture rows against the vehicle-position rows in task 3's
+            least squares [m/rad] (> 0): where the two conflict (the arm's position joints are
+            fixed by the tip once the vehicle is), task 3 settles where gain-weighted position
+            and posture errors balance, |e_pos| ~ posture_weight |e_posture|.
+        posture_level: "below_position" (default: a 4th, lowest level: the vehicle position is
+            held exactly, kinematically, the posture only uses what is left) | "with_position"
+            (the posture rows stacked with the vehicle position in task 3: the vehicle then gives
+            way by about posture_weight times the posture error, 4-5 cm in the 3-D studies).
+        priority_form: "siciliano_slotine" | "singularity_robust".
+        dls_threshold: singular value below which the task inverses are damped (Jacobian units).
+        dls_damping: lambda_max of the damped least squares (same units).
+        rank_tol: relative rank tolerance of the exact projectors.
+        bandwidth_base, bandwidth_attitude, bandwidth_joints: low-level loop bandwidths [rad/s].
+        damping_ratio: of every low-level loop.
+        kp, kd: explicit low-level gains (1 or nv numbers, per qvel dof: N/m, N m/rad, N m/rad;
+            N s/m, N m s/rad), overriding the bandwidth ones.
+        reference_lead_limit: largest |q_r (-) q| per dof [m or rad] (anti-windup; default 1:
+            0.1 bounded the loop's integral action below the moment of a 1 % buoyancy error,
+            leaving a 4 deg attitude offset in the sweep study).
+        feedforward: add the nominal hold force.
+    """
+
+    robots = "floating"
+
+    def __init__(self, robot: NominalRobot, trajectory=None, arm_trajectory: JointTrajectory | None = None,
+                 T: float = DEFAULT_T, gain_tip: float = 1.0, gain_attitude: float = 1.0, gain_position: float = 0.5,
+                 gain_posture: float = 0.5, posture_weight: float = 0.1, posture_level: str = "below_position",
+                 priority_form: str = "siciliano_slotine",
+                 dls_threshold: float = 1e-2, dls_damping: float = 5e-2, rank_tol: float = 1e-10,
+                 bandwidth_base: float = 2.0, bandwidth_attitude: float = 3.0, bandwidth_joints: float = 10.0,
+                 damping_ratio: float = 1.0, kp=None, kd=None, reference_lead_limit: float = 1.0,
+                 feedforward: bool = True) -> None:
+        if not isinstance(robot, NominalRobot):
+            raise ControllerError("task_priority needs robot= a NominalRobot (a floating robot scenario)")
+        lay = robot.layout
+        if not lay.base_free:
+            raise ControllerError("task_priority needs a floating robot (a free-joint vehicle)")
+        if lay.tip_site < 0:
+            raise ControllerError("task_priority needs an end-effector site (tip_site)")
+        self.robot = robot
+        self.trajectory = trajectory
+        if trajectory is not None and not (hasattr(trajectory, "position") and hasattr(trajectory, "velocity")):
+            raise ControllerError(f"trajectory = {trajectory!r} must have position(t) and velocity(t)")
+        self.T = _positive("T", T)
+        for nm, v in (("gain_tip", gain_tip), ("gain_attitude", gain_attitude), ("gain_position", gain_position),
+                      ("gain_posture", gain_posture)):
+            g = _nonneg(nm, v)
+            if g * self.T >= 1.0:  # the sampled CLIK error e(k+1) = (1 - g T) e(k) must converge monotonically
+                raise ControllerError(f"{nm} = {v!r} must be < 1/T = {1.0 / self.T:g} 1/s")
+            setattr(self, nm, g)
+        self.posture_weight = _positive("posture_weight", posture_weight)
+        if posture_level not in POSTURE_LEVELS:
+            raise ControllerError(f"posture_level = {posture_level!r}; allowed: {', '.join(POSTURE_LEVELS)}")
+        self.posture_level = posture_level
+        if priority_form not in PRIORITY_FORMS:
+            raise ControllerError(f"priority_form = {priority_form!r}; allowed: {', '.join(PRIORITY_FORMS)}")
+        self.priority_form = priority_form
+        self.dls_threshold = _positive("dls_threshold", dls_threshold)
+        self.dls_damping = _positive("dls_damping", dls_damping)
+        self.rank_tol = _positive("rank_tol", rank_tol)
+        if self.rank_tol >= 1.0:
+            raise ControllerError(f"rank_tol = {rank_tol!r} must be < 1")
+        self.bandwidth_base = _positive("bandwidth_base", bandwidth_base)
+        self.bandwidth_attitude = _positive("bandwidth_attitude", bandwidth_attitude)
+        self.bandwidth_joints = _positive("bandwidth_joints", bandwidth_joints)
+        self.zeta_ratio = _positive("damping_ratio", damping_ratio)
+        nv = robot.model.nv
+        self.kp_given = _vector("kp", kp, nv)
+        self.kd_given = _vector("kd", kd, nv)
+        self.reference_lead_limit = _positive("reference_lead_limit", reference_lead_limit)
+        self.feedforward = bool(feedforward)
+        if arm_trajectory is not None and tuple(arm_trajectory.names) != tuple(lay.joint_names):
+            raise ControllerError("arm_trajectory joints differ from the robot's")
+        self.arm = arm_trajectory
+        self.nj = len(lay.joint_names)
+        B = robot.allocation()
+        self.allocator = Allocator(B, robot.thruster_lo, robot.thruster_hi) if B.shape[1] else None
+        self.d = int(lay.base_dadr)
+        self.joint_dofs = np.asarray(lay.joint_dadr, dtype=int)
+
+    # ------------------------------------------------------------------ pieces
+
+    def tasks(self, t: float, q: np.ndarray, jac: dict) -> tuple[list[tuple[np.ndarray, np.ndarray]], dict]:
+        """The prioritised tasks [(J_i, v_i)] (3, or 4 with posture_level "below_position") at
+        time t for the measured q (with the nominal model's ``jacobians()`` at q), and their
+        errors (module docstring)."""
+        lay, nv = self.robot.layout, self.robot.model.nv
+        a = lay.base_qadr
+        p_d, v_d = self._tip_desired(t)
+        e_tip = p_d - jac["tip"]                                    # world [m]
+        e_att = rotation_log(self.R_ref @ jac["R_base"].T)          # world rotation vector [rad]
+        e_pos = self.p_ref - q[a:a + 3]                             # world [m]
+        qj_d, qdj_d = self._posture(t)
+        e_post = qj_d - q[lay.joint_qadr]                           # [rad]
+        J1 = jac["tip_p"]
+        J2 = jac["base_r"]
+        S = np.zeros((self.nj, nv))
+        S[np.arange(self.nj), self.joint_dofs] = 1.0
+        w = self.posture_weight
+        # CLIK reference velocities sigma_dot_d + Lambda sigma~ (Antonelli ch. 9, kinematic control)
+        v1 = v_d + self.gain_tip * e_tip
+        v2 = self.gain_attitude * e_att
+        v_pos = self.gain_position * e_pos
+        v_post = w * (qdj_d + self.gain_posture * e_post)
+        errors = {"e_tip": e_tip, "e_attitude": e_att, "e_position": e_pos, "e_posture": e_post,
+                  "tip_desired": p_d}
+        if self.posture_level == "below_position":  # a 4th level: posture strictly below position
+            return [(J1, v1), (J2, v2), (jac["base_p"], v_pos), (w * S, v_post)], errors
+        J3 = np.vstack((jac["base_p"], w * S))
+        return [(J1, v1), (J2, v2), (J3, np.concatenate((v_pos, v_post)))], errors
+
+    def _tip_desired(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        if self.trajectory is None:
+            return self.tip0.copy(), np.zeros(3)
+        p = np.asarray(self.trajectory.position(t), dtype=float).reshape(3)
+        v = np.asarray(self.trajectory.velocity(t), dtype=float).reshape(3)
+        return p, v
+
+    def _posture(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        if self.arm is None:
+            return self.q_joint0.copy(), np.zeros(self.nj)
+        qd, qdd = self.arm(t)
+        return np.asarray(qd, dtype=float), np.asarray(qdd, dtype=float)
+
+    # ------------------------------------------------------------------ interface
+
+    def reset(self, measurement: Measurement) -> None:
+        r, lay, d = self.robot, self.robot.layout, self.d
+        q = np.asarray(measurement.q, dtype=float).copy()
+        self.p_ref, self.quat_ref, self.R_ref, self.q_joint0 = station_reference(q, lay)
+        M = r.mass_matrix(q)
+        self.tip0 = r.jacobians()["tip"].copy()
+        m = np.diag(M)
+        wb = np.zeros(r.model.nv)
+        wb[:] = self.bandwidth_joints
+        wb[d:d + 3] = self.bandwidth_base
+        wb[d + 3:d + 6] = self.bandwidth_attitude
+        self.kp = self.kp_given if self.kp_given is not None else m * wb ** 2
+        self.kd = self.kd_given if self.kd_given is not None else 2.0 * self.zeta_ratio * wb * m
+        self.q_ref = q.copy()           # integrated reference configuration q_r
+        self.q_prev = q.copy()
+        self.k0 = measurement.k
+
+    def _measured_velocity(self, m: Measurement, q: np.ndarray) -> np.ndarray:
+        nv = self.robot.model.nv
+        if m.qd is not None:
+            return np.asarray(m.qd, dtype=float).copy()
+        out = np.zeros(nv)
+        if m.k > self.k0:  # backward difference of the measured poses (qvel coordinates)
+            mujoco.mj_differentiatePos(self.robot.model, out, self.T, self.q_prev, q)
+        return out
+
+    def compute(self, measurement: Measurement) -> Command:
+        r, d, T = self.robot, self.d, self.T
+        model = r.model
+        q = np.asarray(measurement.q, dtype=float).copy()
+        zeta = self._measured_velocity(measurement, q)
+        self.q_prev = q.copy()
+        h = r.hold_force(q)  # also sets the nominal state for the Jacobians below
+        if not self.feedforward:
+            h = np.zeros(model.nv)
+        jac = r.jacobians()
+        tasks, err = self.tasks(measurement.t, q, jac)
+        sol = task_priority_velocity(tasks, self.priority_form, self.dls_threshold, self.dls_damping, self.rank_tol)
+        zeta_r = sol["zeta"]
+
+        # low level: PD on the integrated reference = PI on the velocity error (module docstring)
+        lead = np.zeros(model.nv)
+        mujoco.mj_differentiatePos(model, lead, 1.0, q, self.q_ref)  # q_r (-) q, qvel coordinates
+        lim = self.reference_lead_limit
+        if np.any(np.abs(lead) > lim):  # anti-windup: pull the reference back along
+            lead = np.clip(lead, -lim, lim)
+            qr = q.copy()
+            mujoco.mj_integratePos(model, qr, lead, 1.0)
+            self.q_ref = qr
+        u = self.kp * lead + self.kd * (zeta_r - zeta) + h
+        # q_r(k+1) = q_r(k) (+) T zeta_r(k)
+        mujoco.mj_integratePos(model, self.q_ref, zeta_r, T)
+
+        R = jac["R_base"]
+        wrench = np.concatenate((R.T @ u[d:d + 3], u[d + 3:d + 6]))  # body wrench [N, N m]
+        if self.allocator is not None:
+            res = self.allocator(wrench)
+            thrust, saturated, achieved = res.thrust, res.saturated, res.wrench
+        else:
+            thrust, saturated, achieved = np.zeros(0), np.zeros(0, dtype=bool), np.zeros(6)
+        tau = np.clip(u[r.motor_dofs], r.motor_lo, r.motor_hi)
+        signals = {
+            "base_desired": np.concatenate((self.p_ref, self.quat_ref)),
+            "tip_desired": err["tip_desired"],
+            "tip_measured": jac["tip"].copy(),
+            "zeta_ref": zeta_r.copy(),
+            "e_tip": err["e_tip"], "e_attitude": err["e_attitude"],
+            "e_position": err["e_position"], "e_posture": err["e_posture"],
+            "reference_lead": lead,
+            "dls_lambda2": np.asarray(sol["damping"], dtype=float),
+            "wrench_body": wrench, "wrench_achieved": np.asarray(achieved, dtype=float),
+            "thrust_saturated": np.asarray(saturated, dtype=bool),
+        }
+        return Command(thrust=np.asarray(thrust, dtype=float), torques=tau, signals=signals)

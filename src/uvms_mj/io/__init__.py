@@ -1,0 +1,1 @@
+"""Logs: the MCAP recorder and reader, exports."""

@@ -1,0 +1,1 @@
+"""The paper robot's planar closed forms (to become test oracles)."""

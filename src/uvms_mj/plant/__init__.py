@@ -1,0 +1,1 @@
+"""The simulated robot: one MuJoCo model in water, its thrusters, its state."""

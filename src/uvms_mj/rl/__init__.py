@@ -1,0 +1,1 @@
+"""Reinforcement-learning environments (dm_control, gymnasium)."""

@@ -1,0 +1,1 @@
+"""The sampled closed loop and experiments."""

@@ -1,0 +1,283 @@
+"""The sampled loop: plant at its own dt, controller every T with a zero-order hold.
+
+Measurements are sampled at kT: base pose and joint angles, with optional Gaussian noise,
+quantization and a one-sample delay (:class:`SensorModel`); velocities come from a velocity
+sensor if configured, else the controller differentiates positions. Every controller signal and
+the true plant state are recorded per sample. A diverging plant stops the run cleanly with the
+time and the reason (the record up to then is kept).
+"""
+
+from __future__ import annotations
+
+import math
+import operator
+from dataclasses import dataclass, field
+from typing import Callable
+
+import numpy as np
+
+from uvms_mj.control.base import Command, Controller, Measurement
+from uvms_mj.plant.plant import DivergenceError, Plant, mujoco_warnings
+from uvms_mj.rotations import quat_from_rotvec, quat_mul
+
+
+#: A thrust or joint-torque command beyond this [N, N m] is taken as divergence of the
+#: controller (the robot's actuators give tens of N; the plant saturates them anyway).
+COMMAND_ABS_MAX = 1e6
+
+
+@dataclass(frozen=True)
+class SensorModel:
+    """Measurement model (all off by default).
+
+    Attributes:
+        position_noise: std of Gaussian noise on p0x, p0y [m].
+        angle_noise: std of Gaussian noise on phi0, phi1, phi2 [rad] (shorthand for both below).
+        attitude_noise: std on the base attitude phi0 [rad] (None: angle_noise).
+        joint_noise: std on the joint encoders phi1, phi2 [rad] (None: angle_noise).
+        position_quantum, angle_quantum: quantization steps [m], [rad] (0: none).
+        delay: samples of measurement/computation delay (0 or 1).
+        velocity_sensor: give the controller the true velocities (plus velocity_noise).
+        velocity_noise: std of Gaussian noise on the measured velocities [m/s, rad/s].
+    """
+
+    position_noise: float = 0.0
+    angle_noise: float = 0.0
+    position_quantum: float = 0.0
+    angle_quantum: float = 0.0
+    delay: int = 0
+    velocity_sensor: bool = False
+    velocity_noise: float = 0.0
+    attitude_noise: float | None = None
+    joint_noise: float | None = None
+
+    def __post_init__(self) -> None:
+        for name in ("position_noise", "angle_noise", "position_quantum", "angle_quantum", "velocity_noise",
+                     "attitude_noise", "joint_noise"):
+            v = getattr(self, name)
+            if v is None and name in ("attitude_noise", "joint_noise"):
+                continue
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"sensor.{name} = {v!r} must be finite and >= 0")
+        if self.delay not in (0, 1):
+            raise ValueError(f"sensor.delay = {self.delay!r}; allowed: 0, 1 (samples)")
+
+
+@dataclass
+class RunResult:
+    """A closed-loop run.
+
+    Attributes:
+        t: sample times [s] (N).
+        signals: name -> array (N, ...) of controller signals, thruster forces and the true state
+            (``q_true``, ``qd_true``, ``tip_true``, ``thrust_command``, ``thrust_force``,
+            ``torques``).
+        status: "ok" or "diverged".
+        reason: why it stopped early ("" if ok).
+    """
+
+    t: np.ndarray
+    signals: dict[str, np.ndarray]
+    status: str = "ok"
+    reason: str = ""
+    meta: dict = field(default_factory=dict)
+
+
+def _quantize(x: np.ndarray, quantum: float) -> np.ndarray:
+    return np.round(x / quantum) * quantum if quantum > 0 else x
+
+
+def _observe(plant) -> tuple:
+    """(q, qd, tip, thrust or None) now: Plant.observe, else the plant's properties."""
+    if hasattr(plant, "observe"):
+        return plant.observe()
+    return plant.q, plant.qd, plant.tip_position, None
+
+
+def _command(plant, thrust: np.ndarray, torques: np.ndarray) -> None:
+    if hasattr(plant, "command"):
+        plant.command(thrust, torques, finite=True)  # checked by the loop
+    else:
+        plant.set_thrust(thrust)
+        plant.set_joint_torques(torques)
+
+
+def _step_observe(plant, n: int) -> tuple:
+    if hasattr(plant, "step_observe"):
+        return plant.step_observe(n)
+    plant.step(n)
+    return plant.q, plant.qd, plant.tip_position, None
+
+
+def controller_name(controller: Controller) -> str:
+    """The controller's registry name, else its class name (a plug-in created directly)."""
+    return str(getattr(controller, "name", "") or type(controller).__name__)
+
+
+def measure_robot(plant, layout, sensor: SensorModel, rng: np.random.Generator, q_true: np.ndarray | None = None,
+                  qd_true: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+    """(qpos, qvel or None) as measured on a floating robot (:class:`uvms_mj.plant.robot.RobotPlant`).
+
+    Noise: ``position_noise`` on the vehicle's world position (3), ``attitude_noise`` as a
+    body-frame rotation vector with that std per axis composed with the true orientation
+    (q_meas = q_true * exp(n)), ``joint_noise`` on the joint angles; quantization of the position
+    (``position_quantum``) and the joint angles (``angle_quantum``; the quaternion is not
+    quantized); ``velocity_sensor``: the true qvel (v world, omega body, joint rates) plus
+    ``velocity_noise``. Random numbers are drawn in that order, only for non-zero stds.
+    ``q_true`` / ``qd_true``: the state to measure (default: the plant's now).
+    """
+    q = plant.q if q_true is None else np.array(q_true, dtype=float)
+    a = layout.base_qadr
+    att_noise = sensor.angle_noise if sensor.attitude_noise is None else sensor.attitude_noise
+    joint_noise = sensor.angle_noise if sensor.joint_noise is None else sensor.joint_noise
+    if sensor.position_noise:
+        q[a:a + 3] += rng.normal(0.0, sensor.position_noise, 3)
+    if att_noise:
+        qq = quat_mul(q[a + 3:a + 7], quat_from_rotvec(rng.normal(0.0, att_noise, 3)))
+        q[a + 3:a + 7] = qq / np.linalg.norm(qq)
+    ja = layout.joint_qadr
+    if joint_noise and len(ja):
+        q[ja] += rng.normal(0.0, joint_noise, len(ja))
+    if sensor.position_quantum:
+        q[a:a + 3] = _quantize(q[a:a + 3], sensor.position_quantum)
+    if sensor.angle_quantum and len(ja):
+        q[ja] = _quantize(q[ja], sensor.angle_quantum)
+    qd = None
+    if sensor.velocity_sensor:
+        qd = plant.qd if qd_true is None else np.array(qd_true, dtype=float)
+        if sensor.velocity_noise:
+            qd = qd + rng.normal(0.0, sensor.velocity_noise, qd.size)
+    return q, qd
+
+
+def run_closed_loop(
+    plant: Plant,
+    controller: Controller,
+    duration: float,
+    T: float = 1.0 / 60.0,
+    sensor: SensorModel = SensorModel(),
+    seed: int = 0,
+    warm_start: bool = True,
+    on_sample: Callable[[int, int], None] | None = None,
+    sink: Callable[[float, dict], None] | None = None,
+) -> RunResult:
+    """Run ``controller`` on ``plant`` for ``duration`` seconds.
+
+    Args:
+        T: controller period [s]; must be a whole number of plant steps.
+        warm_start: start the thrusters' lag state at the first command (the robot is holding
+            station when the run starts) instead of at 0 N; see docs/paper-reading.md "Start-up".
+        on_sample: progress callback (k, n_samples).
+        sink: called with (t, row) for every sample as it happens (e.g. an MCAP recorder's
+            ``write_sample``), row mapping signal names to floats, ints, bools or 1-D arrays;
+            the same rows make up the returned :class:`RunResult`.
+    """
+    dt = plant.model.opt.timestep
+    sub = T / dt
+    if abs(sub - round(sub)) > 1e-9 or round(sub) < 1:
+        raise ValueError(f"T = {T!r} s must be a whole multiple of the plant timestep {dt!r} s")
+    sub = int(round(sub))
+    n = int(math.floor(duration / T + 1e-9)) + 1
+    rng = np.random.default_rng(seed)
+    rows: list[dict] = []
+    times: list[float] = []
+    status, reason = "ok", ""
+    q_prev_meas = None
+    mujoco_warnings(clear=True)  # only this run's
+
+    att_noise = sensor.angle_noise if sensor.attitude_noise is None else sensor.attitude_noise
+    joint_noise = sensor.angle_noise if sensor.joint_noise is None else sensor.joint_noise
+    angle_std = np.array([att_noise, joint_noise, joint_noise], dtype=float)
+    noisy = bool(sensor.position_noise or att_noise or joint_noise)
+    quantized = bool(sensor.position_quantum or sensor.angle_quantum)
+
+    layout = getattr(plant, "layout", None)  # a RobotPlant (any robot): its own measurement layout
+
+    def measure(k: int, q_true: np.ndarray, qd_true: np.ndarray) -> Measurement:
+        nonlocal q_prev_meas
+        if layout is not None:
+            q, qd = measure_robot(plant, layout, sensor, rng, q_true, qd_true)
+            if sensor.delay:
+                q_out = q if q_prev_meas is None else q_prev_meas
+                q_prev_meas = q
+                q = q_out
+            return Measurement(k=k, t=k * T, q=q, qd=qd)
+        q = q_true.copy()
+        if noisy:
+            q = q + np.concatenate((rng.normal(0, sensor.position_noise, 2), rng.normal(0, angle_std)))
+        if quantized:
+            q = np.concatenate((_quantize(q[:2], sensor.position_quantum), _quantize(q[2:], sensor.angle_quantum)))
+        qd = None
+        if sensor.velocity_sensor:
+            qd = qd_true + (rng.normal(0, sensor.velocity_noise, 5) if sensor.velocity_noise else 0.0)
+        if sensor.delay:
+            q_out = q if q_prev_meas is None else q_prev_meas
+            q_prev_meas = q
+            q = q_out
+        return Measurement(k=k, t=k * T, q=q, qd=qd)
+
+    on_event = getattr(plant, "on_sample", None)  # scheduled plant events (e.g. a payload pick-up)
+    exact = layout is None and not (noisy or quantized or sensor.velocity_sensor or sensor.delay)  # q = q_true
+    # the state at each sample: observed once, then read by each step (Plant.step_observe: the
+    # compiled sample where it can); the thrust read after the commands where it follows them
+    state = _observe(plant)
+    for k in range(n):
+        if on_event is not None:
+            on_event(k * T)
+        q_true, qd_true, tip_true, thr_lagged = state
+        meas = Measurement(k, k * T, q_true.copy()) if exact else measure(k, q_true, qd_true)
+        if k == 0:
+            controller.reset(meas)
+        cmd: Command = controller.compute(meas)
+        thrust = np.asarray(cmd.thrust, dtype=float)
+        torques = np.asarray(cmd.torques, dtype=float)
+        out = thrust.ravel().tolist() + torques.ravel().tolist()
+        if not math.isfinite(sum(out)):  # also true of a sum beyond the float range: look closer
+            if not all(math.isfinite(v) for v in out):
+                status, reason = "diverged", f"controller output not finite at t = {k * T:.4f} s"
+                break
+        big = max(map(abs, out)) if out else 0.0
+        if big > COMMAND_ABS_MAX:
+            status, reason = "diverged", (f"controller command {big:.3g} (N or N m) beyond {COMMAND_ABS_MAX:g} "
+                                          f"at t = {k * T:.4f} s")
+            break
+        _command(plant, thrust, torques)
+        if k == 0 and warm_start:
+            if layout is not None:
+                plant.warm_start(thrust)
+            else:
+                plant.data.act[plant._thr_act] = np.clip(thrust, plant._thr_lo, plant._thr_hi)
+        times.append(k * T)
+        row = {**cmd.signals, "q_true": q_true, "qd_true": qd_true, "tip_true": tip_true, "q_measured": meas.q,
+               "thrust_command": thrust,
+               "thrust_force": thr_lagged if thr_lagged is not None and k > 0 else plant.thruster_forces,
+               "torques": torques}
+        rows.append(row)
+        if sink is not None:
+            sink(k * T, row)
+        if on_sample is not None:
+            on_sample(k, n)
+        if k == n - 1:
+            break
+        try:
+            state = _step_observe(plant, sub)
+        except DivergenceError as exc:
+            status, reason = "diverged", str(exc)
+            break
+    keys = dict.fromkeys(key for row in rows[:1] for key in row)  # first-appearance order
+    uniform = True  # every row has the first row's signals
+    for row in rows[1:]:
+        if len(row) != len(keys) or not keys.keys() >= row.keys():
+            keys.update(dict.fromkeys(row))
+            uniform = False
+    if uniform:
+        signals = {key: np.asarray(list(map(operator.itemgetter(key), rows))) for key in keys}
+    else:
+        signals = {key: np.asarray([row[key] for row in rows if key in row]) for key in keys}
+    meta = {"T": T, "dt": dt, "seed": seed, "controller": controller_name(controller)}
+    warned = mujoco_warnings(clear=True)
+    if warned:
+        meta["mujoco_warnings"] = warned
+        if status != "ok":
+            reason = f"{reason}; MuJoCo warning: {warned[0]}"
+    return RunResult(t=np.asarray(times), signals=signals, status=status, reason=reason, meta=meta)
