@@ -101,10 +101,7 @@ def _entry_points() -> dict[str, metadata.EntryPoint]:
 
 def available() -> list[str]:
     """Names of the built-in and installed (entry-point) controllers."""
-    from uvms_mj.control import builtin
-    from uvms_mj.control import rac
-    from uvms_mj.control import station_pid
-    from uvms_mj.control import task_priority  # noqa: F401  (registers the built-ins)
+    from uvms_mj.control import builtin, rac, station_pid, task_priority  # noqa: F401  (registers the built-ins)
 
     return sorted(set(_REGISTRY) | set(_entry_points()))
 
@@ -115,10 +112,7 @@ def create(name: str, **kwargs: Any) -> Controller:
     Raises:
         ControllerError: unknown name (the message lists the registered controllers).
     """
-    from uvms_mj.control import builtin
-    from uvms_mj.control import rac
-    from uvms_mj.control import station_pid
-    from uvms_mj.control import task_priority  # noqa: F401
+    from uvms_mj.control import builtin, rac, station_pid, task_priority  # noqa: F401
 
     factory = _REGISTRY.get(name)
     if factory is None:

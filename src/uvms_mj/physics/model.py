@@ -23,8 +23,7 @@ from typing import Any
 
 import mujoco
 
-from uvms_mj.physics import build
-from uvms_mj.physics import config
+from uvms_mj.physics import build, config
 
 WATER, HYDRO, THRUSTER = "uvms.water", "uvms.hydro", "uvms.thruster"
 PLUGINS = (WATER, HYDRO, THRUSTER)
