@@ -20,7 +20,8 @@ from uvms_mj.control.base import Measurement
 from uvms_mj.sim.experiment import metrics
 from uvms_mj.sim.loop import run_closed_loop
 from uvms_mj.control.nominal import NominalRobot
-from uvms_mj.plant.robot import InitialState, RobotPlant
+from uvms_mj.plant.layout import InitialState
+from uvms_mj.plant.plant import Plant
 from uvms_mj.scenario.schema import load_scenario, run_scenario
 
 REPO = Path(__file__).resolve().parents[1]
@@ -45,7 +46,7 @@ def test_generic_rac_gives_the_planar_numbers_on_the_paper_robot(name):
 
 
 def _plant(current=None):
-    return RobotPlant("bluerov2_alpha", current=current,
+    return Plant("bluerov2_alpha", current=current,
                       initial=InitialState(position=(0, 0, -1), joints={"alpha_shoulder": 1.9, "alpha_elbow": 1.2}))
 
 

@@ -24,7 +24,11 @@ from uvms_mj.sim.loop import SensorModel, run_closed_loop
 from uvms_mj.control.nominal import JointTrajectory, NominalRobot
 from uvms_mj.plant.params import ParameterError
 from uvms_mj.physics import model as pm
-from uvms_mj.plant.robot import InitialState, Layout, RobotPlant, compile_robot_spec, quat_from_rpy, robot_path, rpy_from_quat
+from uvms_mj.plant.files import robot_path
+from uvms_mj.plant.layout import InitialState, Layout
+from uvms_mj.plant.plant import Plant
+from uvms_mj.plant.robot import compile_robot_spec
+from uvms_mj.rotations import quat_from_rpy, rpy_from_quat
 from uvms_mj.scenario.schema import ScenarioError, load_scenario, run_scenario, validate_scenario
 from uvms_mj.physics.thrusters import CurveInverse, allocation_matrix, invert_curve, thruster_curves
 
@@ -107,17 +111,17 @@ def test_rpy_quaternion_matches_hand_built_rotation(rpy):
 def test_initial_state_by_name():
     st = InitialState(position=(1, 2, -3), quat=(2, 0, 0, 0), joints={"alpha_shoulder": 1.2},
                       linear_velocity=(0.1, 0, 0), angular_velocity=(0, 0, 0.2), joint_velocities={"alpha_base": 0.3})
-    p = RobotPlant("bluerov2_alpha", initial=st)
+    p = Plant("bluerov2_alpha", initial=st)
     np.testing.assert_array_equal(p.base_pose, [1, 2, -3, 1, 0, 0, 0])
     assert p.joint_angles[1] == 1.2
     np.testing.assert_array_equal(p.qd[:6], [0.1, 0, 0, 0, 0, 0.2])
     assert p.qd[6] == 0.3
     with pytest.raises(ParameterError, match="did you mean 'alpha_shoulder'"):
-        RobotPlant("bluerov2_alpha", initial=InitialState(joints={"alpha_shouldr": 1.0}))
+        Plant("bluerov2_alpha", initial=InitialState(joints={"alpha_shouldr": 1.0}))
     with pytest.raises(ParameterError, match="outside the joint's range"):
-        RobotPlant("bluerov2_alpha", initial=InitialState(joints={"alpha_shoulder": -1.0}))
+        Plant("bluerov2_alpha", initial=InitialState(joints={"alpha_shoulder": -1.0}))
     with pytest.raises(ParameterError, match="no such keyframe"):
-        RobotPlant("bluerov2_alpha", initial=InitialState(keyframe="nope"))
+        Plant("bluerov2_alpha", initial=InitialState(keyframe="nope"))
 
 
 def test_curve_inverse_matches_invert_curve():
@@ -133,7 +137,7 @@ def test_curve_inverse_matches_invert_curve():
 def test_thrust_in_newtons_gives_the_allocated_wrench():
     """After the lag settles, each thruster gives the commanded force (forward curve) and the
     vehicle gets the wrench B f (MuJoCo's qfrc_actuator, free-joint rows, against B)."""
-    p = RobotPlant("bluerov2_heavy", gravity=False, initial=InitialState(quat=tuple(quat_from_rpy(0.2, -0.1, 0.5))))
+    p = Plant("bluerov2_heavy", gravity=False, initial=InitialState(quat=tuple(quat_from_rpy(0.2, -0.1, 0.5))))
     f = np.array([3.0, -2.0, 5.0, 1.0, -4.0, 2.5, 0.5, -1.5])
     p.set_thrust(f)
     p.data.act[p._thr_act] = p.thrust_to_ctrl(f)  # settled lag
@@ -160,7 +164,7 @@ def test_hold_force_is_the_hand_computed_net_buoyancy():
 
 
 def _station(robot, current=None, duration=10.0, init=None, **params):
-    p = RobotPlant(robot, current=current, initial=init or InitialState(position=(0, 0, -1)))
+    p = Plant(robot, current=current, initial=init or InitialState(position=(0, 0, -1)))
     c = create("station_pid", robot=NominalRobot(robot), **params)
     return p, run_closed_loop(p, c, duration, T=c.T)
 
@@ -193,7 +197,7 @@ def test_station_pid_integral_takes_the_damping_at_the_current_speed():
 
 def test_station_pid_with_arm_motion_tracks_joints():
     names = ("alpha_base", "alpha_shoulder", "alpha_elbow", "alpha_wrist")
-    p = RobotPlant("bluerov2_alpha", initial=InitialState(position=(0, 0, -1), joints={"alpha_shoulder": 1.5,
+    p = Plant("bluerov2_alpha", initial=InitialState(position=(0, 0, -1), joints={"alpha_shoulder": 1.5,
                                                                                          "alpha_elbow": 1.5}))
     arm = JointTrajectory.from_waypoints(names, p.joint_angles, [(2.0, {"alpha_base": 0.8}), (4.0, {"alpha_base": 0.0})])
     c = create("station_pid", robot=NominalRobot("bluerov2_alpha"), arm_trajectory=arm)
@@ -224,7 +228,7 @@ def test_robot_measurement_noise_is_seeded():
     sensor = SensorModel(position_noise=1e-3, attitude_noise=1e-3, joint_noise=1e-3)
     runs = []
     for _ in range(2):
-        p = RobotPlant("bluerov2_alpha", initial=InitialState(position=(0, 0, -1), joints={"alpha_shoulder": 1.5}))
+        p = Plant("bluerov2_alpha", initial=InitialState(position=(0, 0, -1), joints={"alpha_shoulder": 1.5}))
         c = create("station_pid", robot=NominalRobot("bluerov2_alpha"))
         runs.append(run_closed_loop(p, c, 1.0, T=c.T, sensor=sensor, seed=3))
     np.testing.assert_array_equal(runs[0].signals["q_measured"], runs[1].signals["q_measured"])

@@ -21,7 +21,7 @@ from click.testing import CliRunner
 from uvms_mj.sim.loop import RunResult
 from uvms_mj.plant.params import ParameterError
 from uvms_mj.io.recorder import McapRecorder, iter_messages, log_info, read_log
-from uvms_mj.plant.robot import RobotPlant
+from uvms_mj.plant.plant import Plant
 
 T = 1 / 60  # s, the sample period
 DURATION = 2.0  # s
@@ -32,7 +32,7 @@ PAPER_TOPICS = {"/control", "/state/true", "/tf", "/joint_states", "/scene", "/s
 
 def _simulate(name: str, duration: float = DURATION, optional: bool = True):
     """(plant, RunResult, rows): ``name`` driven by constant thrusts [N] and torques [N m]."""
-    plant = RobotPlant(name)
+    plant = Plant(name)
     lay = plant.layout
     thrust = np.linspace(-4.0, 6.0, len(lay.thruster_names))
     tau = np.full(len(lay.motor_names), 0.05)

@@ -15,7 +15,8 @@ from uvms_mj.control.base import ControllerError, Measurement, available, create
 from uvms_mj.control.task_priority import null_space_projector, task_priority_velocity
 from uvms_mj.sim.loop import SensorModel, run_closed_loop
 from uvms_mj.control.nominal import NominalRobot
-from uvms_mj.plant.robot import InitialState, RobotPlant
+from uvms_mj.plant.layout import InitialState
+from uvms_mj.plant.plant import Plant
 from uvms_mj.control.trajectories import Shifted as _Shifted
 from uvms_mj.control.trajectories import Circle
 
@@ -135,7 +136,7 @@ def test_null_space_projector_is_exact(nominal, seed):
 
 
 def _run(duration: float, trajectory=None, **params):
-    plant = RobotPlant(ROBOT, initial=INIT)
+    plant = Plant(ROBOT, initial=INIT)
     ctrl = create("task_priority", robot=NominalRobot(ROBOT), trajectory=trajectory, T=T, **params)
     return plant, run_closed_loop(plant, ctrl, duration, T=T)
 
@@ -161,7 +162,7 @@ def test_still_water_exact_model_holds_tip_and_vehicle():
 def _circle(phase: float = 0.0):
     """Circle r = 0.05 m, period 20 s (|v| = 15.7 mm/s; the speed steps at t = 0) in the world
     horizontal plane, shifted to start at the initial tip (as robot_scenario does)."""
-    plant0 = RobotPlant(ROBOT, initial=INIT)
+    plant0 = Plant(ROBOT, initial=INIT)
     circ = Circle(centre=(0.0, 0.0, 0.0), radius=0.05, period=20.0, phase=phase)
     return _Shifted(circ, plant0.tip_position - circ.position(0.0)), plant0.tip_position
 
@@ -217,7 +218,7 @@ def test_closed_loop_with_a_velocity_sensor_is_deterministic():
     tr, _ = _circle()
 
     def once():
-        plant = RobotPlant(ROBOT, initial=INIT)
+        plant = Plant(ROBOT, initial=INIT)
         ctrl = create("task_priority", robot=NominalRobot(ROBOT), trajectory=tr, T=T)
         return run_closed_loop(plant, ctrl, 4.0, T=T, sensor=SensorModel(velocity_sensor=True))
 
@@ -232,7 +233,7 @@ def test_closed_loop_with_a_velocity_sensor_is_deterministic():
 def test_velocity_sensor_and_differences_both_work():
     nom = NominalRobot(ROBOT)
     ctrl = create("task_priority", robot=nom)
-    q = RobotPlant(ROBOT, initial=INIT).q
+    q = Plant(ROBOT, initial=INIT).q
     ctrl.reset(Measurement(k=0, t=0.0, q=q))
     c0 = ctrl.compute(Measurement(k=0, t=0.0, q=q))
     c1 = ctrl.compute(Measurement(k=1, t=T, q=q, qd=np.zeros(nom.model.nv)))

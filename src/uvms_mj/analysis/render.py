@@ -741,7 +741,7 @@ def robot_of(log) -> dict | None:
 
 def _robot_file(robot: dict, model_path: str | Path | None) -> Path:
     """The robot's MJCF file: ``model_path``, else the recorded path, else the built-in name."""
-    from uvms_mj.plant.robot import robot_path
+    from uvms_mj.plant.files import robot_path
 
     if model_path is not None:
         return Path(model_path)
@@ -837,7 +837,8 @@ def _robot_scene_model(robot: dict, q_log: np.ndarray, width: int, height: int,
     import mujoco
 
     from uvms_mj.plant.params import ParameterError
-    from uvms_mj.plant.robot import Layout, compile_robot_spec
+    from uvms_mj.plant.layout import Layout
+    from uvms_mj.plant.robot import compile_robot_spec
     from uvms_mj.rotations import rpy_from_quat
 
     path = _robot_file(robot, model_path)

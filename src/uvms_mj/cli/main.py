@@ -242,7 +242,7 @@ def _run_one(scenario, out: Path, progress: bool = True, source: str | None = No
     _warn(scenario)
     meta = {"scenario": resolved(scenario), "seed": scenario.seed}
     rec_kw = {}
-    if getattr(plant, "layout", None) is not None:  # a floating robot: the recorder describes it from its model
+    if getattr(getattr(plant, "layout", None), "base_free", False):  # a floating robot: the recorder describes it from its model
         from uvms_mj.scenario.robot import robot_info
 
         meta["robot"] = robot_info(scenario, plant)

@@ -25,7 +25,9 @@ import numpy as np
 
 from uvms_mj.plant.params import ParameterError
 from uvms_mj.physics import model as _pm
-from uvms_mj.plant.robot import Layout, compile_robot_spec, robot_path
+from uvms_mj.plant.files import robot_path
+from uvms_mj.plant.layout import Layout
+from uvms_mj.plant.robot import compile_robot_spec
 from uvms_mj.physics.thrusters import allocation_matrix
 from uvms_mj.control.trajectories import min_jerk
 

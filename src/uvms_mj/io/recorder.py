@@ -51,7 +51,7 @@ topic                  schema                   content and rate
 =====================  =======================  ==============================================
 
 Robot logs (any floating robot: ``McapRecorder(path, None, metadata, model=plant.model)``
-with a :class:`~uvms_mj.plant.robot.RobotPlant`'s model; World z up, so no ``view`` frame) have the
+with a free vehicle's :class:`~uvms_mj.plant.plant.Plant` model; World z up, so no ``view`` frame) have the
 same ``/state/true`` and ``/control`` channels and, by the model's own names
 (:class:`~uvms_mj.plant.robot.Layout`):
 
@@ -829,7 +829,7 @@ class _RobotChannels:
     def __init__(self, model, tip_site: str | None) -> None:
         import mujoco
 
-        from uvms_mj.plant.robot import Layout
+        from uvms_mj.plant.layout import Layout
 
         if not isinstance(model, mujoco.MjModel):
             raise TypeError(f"McapRecorder: model must be a mujoco.MjModel, not {type(model).__name__}")
@@ -1092,7 +1092,7 @@ class McapRecorder:
         path_resolution: run time [s] between stored path points.
         chunk_size: MCAP chunk size [bytes] (a chunk is also finished at every flush).
         compression: "zstd", "lz4" or "none".
-        model: any floating robot's compiled model (a :class:`~uvms_mj.plant.robot.RobotPlant`'s
+        model: any floating robot's compiled model (a :class:`~uvms_mj.plant.plant.Plant`'s
             ``model``; ``params`` must then be None): ``/tf``, ``/scene``, ``/joint_states``,
             ``/thrusters`` and ``/scene/paths`` come from it by name (module docstring, robot
             logs). The tip site is ``metadata["robot"]["layout"]["tip_site"]`` when given, else

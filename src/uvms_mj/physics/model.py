@@ -277,6 +277,20 @@ def set_water(spec: mujoco.MjSpec, **values: str) -> None:
     raise ModelError("the model declares no uvms.water instance")
 
 
+def water_config(spec: mujoco.MjSpec) -> dict[str, str]:
+    """The ``uvms.water`` attributes of a spec (a copy).
+
+    Raises:
+        ModelError: the spec has none."""
+    t = _texts(spec).get(WATER)
+    if t is not None:
+        return json.loads(t.data)
+    for p in spec.plugins:
+        if p.plugin_name == WATER:
+            return dict(p.config)
+    raise ModelError("the model declares no uvms.water instance")
+
+
 def body_config(spec: mujoco.MjSpec, body: str) -> dict[str, str]:
     """The ``uvms.hydro`` attributes of a body (a copy).
 

@@ -1,9 +1,11 @@
-"""The plant: the MuJoCo model of the robot, in water through the uvms plugins.
+"""The plant: any robot's MuJoCo model, in water through the uvms plugins.
 
-``Plant()`` loads ``models/scene.xml`` (robot + scene). The robot file carries its hydrodynamics
-as attributes of the ``uvms.water`` / ``uvms.hydro`` MuJoCo plugins (``docs/hydrodynamics.md``),
-so plain ``mujoco.mj_step`` / ``mujoco.mj_forward`` on ``plant.model`` and ``plant.data`` (or on
-any other MjData of that model) include them with every integrator (Euler, implicit, RK4):
+``Plant()`` loads the paper's robot in its scene (``robot: paper``, ``models/scene.xml``);
+``Plant("bluerov2_alpha")`` or ``Plant("my_robot.xml")`` any other robot. Every robot file
+carries its hydrodynamics as attributes of the ``uvms.water`` / ``uvms.hydro`` MuJoCo plugins and
+its thrusters as site actuators (``docs/hydrodynamics.md``), so plain ``mujoco.mj_step`` /
+``mujoco.mj_forward`` on ``plant.model`` and ``plant.data`` (or on any other MjData of that
+model) include them with every integrator (Euler, implicit, RK4):
 
 * the exact added-mass matrix is added to MuJoCo's mass matrix ``d.M`` and refactored
   (no lag, no filter), and
@@ -14,18 +16,30 @@ Two backends compute the same hydrodynamics (``Plant(backend=...)``, default fro
 ``$UVMS_MJ_BACKEND``, else "auto"): "native", the C plugins compiled into the model, and
 "python", the numpy reference (:mod:`uvms_mj.physics.reference`) served through
 ``mjcb_passive`` (the model's plugins compiled with every term off, or stripped where they
-cannot be built); "auto" takes native when the
-plugin library can be built. Frames: world X horizontal, Y up; angles counter-clockwise positive.
+cannot be built); "auto" takes native when the plugin library can be built.
+
+One class for every robot; what differs is the robot's :class:`~uvms_mj.plant.layout.Layout`:
+
+* a free vehicle (a body on a free joint): ``q`` = qpos (x, y, z world, qw, qx, qy, qz, joint
+  angles), ``qd`` = qvel (linear velocity WORLD, angular velocity BODY, joint rates), the tip in
+  3-D, world z up;
+* a planar base (slides along world axes and a hinge, the paper's slide x, slide y, hinge z):
+  ``q`` = (p0x, p0y, phi0, phi1, phi2), the tip in the plane (x, y), world X horizontal, Y up,
+  angles counter-clockwise positive.
+
+Thrusters are commanded in newtons (:meth:`Plant.set_thrust`). A thruster whose force is its
+command (a ``general`` actuator of unit gain, the paper's) takes the thrust as its command; any
+other (a ``uvms.thruster`` plugin with a thrust curve) gets the inverse of the model's own curve,
+as a thruster driver with a calibrated lookup table would.
 
 The plant adds to MuJoCo only what a simulation run needs around it: parameter overrides,
-named accessors, thruster commands with the optional dead zone, divergence detection and the
-energy.
+named accessors, thruster commands with the optional dead zone, scheduled events (a payload
+picked up, a thruster failing), divergence detection and the energy (:mod:`.stepping`).
 """
 
 from __future__ import annotations
 
 import math
-import threading
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -36,117 +50,29 @@ import numpy as np
 
 from uvms_mj.planar.hydro import HydroTerms
 from uvms_mj.planar.native import BACKENDS, backend_from_env
-from uvms_mj.plant.params import (
-    JOINT_MOTORS,
-    THRUSTERS,
-    TIP_SITE,
-    ParameterError,
-    RobotParams,
-    apply_overrides,
-    read_params,
+from uvms_mj.plant import params as _params
+from uvms_mj.plant.files import default_model_path, models_dir, robot_path  # noqa: F401  (re-exported)
+from uvms_mj.plant.layout import InitialState, Layout
+from uvms_mj.plant.params import ParameterError, RobotParams, read_params
+from uvms_mj.plant.robot import Payload, factor_of, resolve_role
+from uvms_mj.plant.robot import apply_overrides as _apply_named
+from uvms_mj.plant.stepping import (  # noqa: F401  (DivergenceError, Energy, mujoco_warnings: re-exported)
+    DivergenceError,
+    Energy,
+    Stepping,
+    _finite,
+    install_mujoco_warning_handler,
+    mujoco_warnings,
 )
 from uvms_mj.physics import build as _build
 from uvms_mj.physics import model as _pm
 from uvms_mj.physics import python_backend as _pyb
-from uvms_mj.physics import reference as _ref
+from uvms_mj.physics.current import Current
+from uvms_mj.physics.thrusters import CurveInverse, thruster_curves
 
-def _finite(x: np.ndarray) -> bool:
-    """Every entry of a small float array finite (cheaper than numpy's all(isfinite) here)."""
-    return all(map(math.isfinite, x.ravel().tolist()))
+__all__ = ["DivergenceError", "Energy", "Plant", "ThrusterFailure", "set_integration", "water_terms"]
 
-
-#: What :meth:`Plant.step` saves before a batch of steps (restored for an exact replay).
-_SNAPSHOT = mujoco.mjtState.mjSTATE_INTEGRATION
-
-_PKG = Path(__file__).resolve().parents[1]  # the uvms_mj package folder
-
-def models_dir() -> Path:
-    """Folder holding uvms.xml and scene.xml (the repository's ``models/``, or the packaged copy)."""
-    for cand in (_PKG.parents[1] / "models", _PKG / "models"):
-        if (cand / "uvms.xml").is_file():
-            return cand
-    raise FileNotFoundError("cannot find the uvms_mj models folder (models/uvms.xml)")
-
-
-def default_model_path() -> Path:
-    """The default plant model: ``models/scene.xml`` (robot + floor, lights, cameras)."""
-    return models_dir() / "scene.xml"
-
-
-# MuJoCo's own warnings (mju_warning: e.g. "Nan, Inf or huge value in QACC") go by default to
-# stdout and to a MUJOCO_LOG.TXT in the current folder. They are routed instead to stderr and to
-# a per-process list that the closed loop puts in its run's metadata (RunResult.meta
-# "mujoco_warnings"). Each process (sweep workers included) installs its own handler.
-_MJ_WARNINGS: list[str] = []
-_MJ_WARNINGS_MAX = 100
-_mj_lock = threading.Lock()
-_mj_handler_pid: int | None = None
-
-
-def _on_mujoco_warning(msg: str) -> None:
-    text = " ".join(str(msg).split())
-    with _mj_lock:
-        if len(_MJ_WARNINGS) < _MJ_WARNINGS_MAX:
-            _MJ_WARNINGS.append(text)
-    try:
-        import sys
-
-        sys.stderr.write(f"mujoco warning: {text}\n")
-    except Exception:  # noqa: BLE001 - a closed stderr must not break the simulation
-        pass
-
-
-def install_mujoco_warning_handler() -> None:
-    """Route MuJoCo's warnings to stderr and :func:`mujoco_warnings` instead of MUJOCO_LOG.TXT
-    (once per process; done by every Plant)."""
-    global _mj_handler_pid
-    import os
-
-    if _mj_handler_pid != os.getpid():
-        mujoco.set_mju_user_warning(_on_mujoco_warning)
-        _mj_handler_pid = os.getpid()
-
-
-def mujoco_warnings(clear: bool = True) -> list[str]:
-    """MuJoCo warnings seen in this process since the last call (with ``clear``)."""
-    with _mj_lock:
-        out = list(_MJ_WARNINGS)
-        if clear:
-            _MJ_WARNINGS.clear()
-    return out
-
-
-class DivergenceError(RuntimeError):
-    """The simulated state became non-finite or ran away.
-
-    Attributes:
-        time: simulation time [s] at which it was detected.
-        reason: what was detected.
-    """
-
-    def __init__(self, time: float, reason: str) -> None:
-        super().__init__(f"simulation diverged at t = {time:.4f} s: {reason}")
-        self.time = time
-        self.reason = reason
-
-
-@dataclass(frozen=True)
-class Energy:
-    """Mechanical energy of the plant [J] (velocities relative to the world for the rigid
-    part and to the water for the added part)."""
-
-    kinetic_rigid: float
-    kinetic_added: float
-    potential_gravity: float
-    potential_buoyancy: float
-
-    @property
-    def kinetic(self) -> float:
-        return self.kinetic_rigid + self.kinetic_added
-
-    @property
-    def total(self) -> float:
-        return self.kinetic + self.potential_gravity + self.potential_buoyancy
+_RESET_TO_INITIAL = object()  # Plant.reset's default: the plant's initial state
 
 
 def _resolve_backend(requested: str | None, terms: HydroTerms) -> bool:
@@ -198,26 +124,99 @@ def set_integration(m: mujoco.MjModel, timestep: float | None, integrator: str |
         m.opt.integrator = names[key]
 
 
-# --------------------------------------------------------------------------- plant
+
+def _is_planar_spec(spec: mujoco.MjSpec) -> bool:
+    """No free joint: a planar base (the paper's parameter vocabulary applies to its overrides)."""
+    return not any(j.type == mujoco.mjtJoint.mjJNT_FREE for j in spec.joints)
 
 
-class Plant:
-    """The robot in MuJoCo with exact added mass, strip drag, buoyancy, thrusters and current.
+def _planar_key(key: str) -> bool:
+    """A key of the paper robot's parameter vocabulary (:data:`uvms_mj.plant.params.OVERRIDE_KEYS`)."""
+    head, _, fld = str(key).partition(".")
+    return (key == "water_density" or key.startswith("thrusters.")
+            or (head in _params.HYDRO_BODIES and fld in ("mass", "inertia", "added_mass", "drag_coef", "volume", "cob")))
+
+
+def apply_model_overrides(spec: mujoco.MjSpec, overrides: Mapping[str, Any]) -> None:
+    """Parameter overrides of any robot, in order: on a planar robot (the paper's) the keys of
+    its parameter vocabulary (:data:`uvms_mj.plant.params.OVERRIDE_KEYS`: ``base.added_mass`` =
+    [m_Ax, m_Ay, I_A], ``thrusters.tau``...) go to :func:`uvms_mj.plant.params.apply_overrides`;
+    every other key is by element name (:func:`uvms_mj.plant.robot.apply_overrides`: bodies,
+    joints, actuators, the water, the ``vehicle`` role, factors).
+
+    Raises:
+        ParameterError: as the two functions."""
+    planar = _is_planar_spec(spec)
+    for key, value in overrides.items():
+        key = resolve_role(spec, key)
+        if planar and _planar_key(key):
+            f = factor_of(value)
+            if f is not None:
+                value = (f * _planar_value(spec, key)).tolist()
+            _params.apply_overrides(spec, {key: value})
+        else:
+            _apply_named(spec, {key: value})
+
+
+def _planar_value(spec: mujoco.MjSpec, key: str) -> np.ndarray:
+    """The paper robot's own value of a parameter key (what a factor multiplies)."""
+    p = read_params(_pm.compile_spec(spec.copy(), native=False, source="model"))
+    head, _, fld = key.partition(".")
+    if key == "water_density":
+        return np.array([p.rho])
+    if head == "thrusters":
+        t = p.thrusters[0]
+        return np.atleast_1d(np.array({"tau": t.tau, "force_range": t.force_range, "dead_zone": p.dead_zone}[fld],
+                                      dtype=float))
+    b = p.body(head)
+    vals = {"mass": b.mass, "inertia": b.inertia, "added_mass": [b.added_mass[0], b.added_mass[1], b.added_inertia],
+            "drag_coef": b.drag_coef, "volume": b.volume, "cob": b.cob[:2]}
+    return np.atleast_1d(np.array(vals[fld], dtype=float))
+
+
+@dataclass(frozen=True)
+class ThrusterFailure:
+    """A thruster that fails at time ``t`` [s]: from the first control sample at or after ``t``
+    its force is zero (its actuator's force range becomes [0, 0], which MuJoCo applies to the
+    actuator force whatever the command; the controller is not told).
+
+    Attributes:
+        thruster: the thruster actuator's name; t: the failure time [s] (>= 0).
+    """
+
+    thruster: str
+    t: float = 0.0
+
+
+class Plant(Stepping):
+    """A robot in MuJoCo with exact added mass, strip drag, buoyancy, thrusters and current
+    (module docstring).
 
     Args:
-        model: path of an MJCF file (default: ``models/scene.xml``).
-        overrides: parameter overrides applied to the model before it is compiled, keys as in
-            :data:`uvms_mj.plant.params.OVERRIDE_KEYS` (e.g. ``{"base.volume": 0.03}``).
-        terms: which hydrodynamic terms to apply (:class:`HydroTerms`, all on by default).
+        model: a built-in robot name (:data:`uvms_mj.plant.files.BUILTIN_ROBOTS`) or an MJCF
+            path; default the paper's robot in its scene (``models/scene.xml``).
+        overrides: parameter overrides applied to the model before it is compiled
+            (:func:`apply_model_overrides`: by element name, ``{"vehicle.mass": "x1.1"}``; the
+            paper robot's own keys too, e.g. ``{"base.volume": 0.03}``).
+        terms: which hydrodynamic terms to apply (:class:`HydroTerms`, all on by default;
+            ``added_mass="lagged"`` and ``drag="mujoco"`` need a planar robot with the paper's
+            parameters).
         gravity: apply gravity (and therefore buoyancy, which is -rho V g).
-        current: uniform water current (world frame, m/s, 2 or 3 numbers); default: the model's.
-        dead_zone: zero thrust commands inside the thrusters' dead zone.
+        current: the water current: 2 or 3 numbers (uniform, world frame, m/s) or a
+            :class:`~uvms_mj.physics.current.Current` (Gauss-Markov, depth profile); default:
+            the model's.
+        dead_zone: zero thrust commands inside the thrusters' dead zone: True (the band of the
+            paper robot's parameters) or (low, high) [N].
         timestep, integrator: override the model's (e.g. ``integrator="RK4"``).
+        initial: the initial state (:class:`~uvms_mj.plant.layout.InitialState`); default the
+            model's initial keyframe (a keyframe named ``*initial``), else ``qpos0``.
+        tip_site: end-effector site (default: the first site whose name ends in "tip").
         max_speed: runaway threshold on sum |q_dot_i| (m/s and rad/s together).
         backend: "native" (the C plugins, built on first use), "python" (the numpy reference
             through ``mjcb_passive``) or "auto" (native if it can be built, else python);
-            default: ``$UVMS_MJ_BACKEND``, else "auto". ``added_mass="lagged"`` always runs in
-            Python. :attr:`backend` tells which one is in use.
+            default: ``$UVMS_MJ_BACKEND``, else "auto". :attr:`backend` tells which one is in use.
+        payload: a payload picked up during the run (:class:`~uvms_mj.plant.robot.Payload`).
+        failures: thrusters failing during the run (:class:`ThrusterFailure`).
 
     Raises:
         ParameterError: missing file, missing element, a non-physical parameter or an
@@ -226,8 +225,6 @@ class Plant:
             plugins cannot be built (e.g. no C compiler); the message says why.
     """
 
-    _snapshot: np.ndarray | None = None  # Plant.step's saved state (per instance once used)
-
     def __init__(
         self,
         model: str | Path | None = None,
@@ -235,35 +232,58 @@ class Plant:
         overrides: Mapping[str, Any] | None = None,
         terms: HydroTerms = HydroTerms(),
         gravity: bool = True,
-        current: Sequence[float] | None = None,
-        dead_zone: bool = False,
+        current: Sequence[float] | Current | None = None,
+        dead_zone: bool | Sequence[float] = False,
         timestep: float | None = None,
         integrator: str | None = None,
+        initial: InitialState | None = None,
+        tip_site: str | None = None,
         max_speed: float = 100.0,
         backend: str | None = None,
+        payload: Payload | None = None,
+        failures: Sequence[ThrusterFailure] = (),
     ) -> None:
         install_mujoco_warning_handler()
-        path = Path(model) if model is not None else default_model_path()
+        path = default_model_path() if model is None else robot_path(model)
         if not isinstance(terms, HydroTerms):
             raise ParameterError(f"terms = {terms!r} must be a HydroTerms")
         if not (max_speed > 0):
             raise ParameterError(f"max_speed = {max_speed!r} must be > 0")
+        if payload is not None and not (payload.mass > 0 and payload.t >= 0):
+            raise ParameterError(f"payload = {payload!r}: mass must be > 0 and t >= 0")
+        if initial is not None and not isinstance(initial, InitialState):
+            raise ParameterError(f"initial = {initial!r} must be an InitialState")
         native = _resolve_backend(backend, terms)
+        if isinstance(current, Current):
+            water = current.attributes()
+            wind = np.asarray(current.velocity, dtype=float)
+        elif current is not None:
+            cur = np.asarray(current, dtype=float).ravel()
+            if cur.shape not in ((2,), (3,)) or not np.all(np.isfinite(cur)):
+                raise ParameterError(f"current = {current!r} must be 2 or 3 finite numbers (m/s, world frame)")
+            wind = np.zeros(3)
+            wind[: cur.size] = cur
+            water = {"current": _pm.fmt(wind)}
         try:
             spec = _pm.load_spec(path)
+            planar = _is_planar_spec(spec)
+            if planar is False and (terms.added_mass == "lagged" or terms.drag == "mujoco"):
+                raise ParameterError(f"terms = {terms!r}: a free vehicle supports added_mass exact|off, "
+                                     "drag strip|off (lagged and mujoco are the paper's planar robot's)")
             if overrides:
-                apply_overrides(spec, overrides)
+                apply_model_overrides(spec, overrides)
             if not gravity:
                 spec.option.gravity = [0.0, 0.0, 0.0]
             if current is not None:
-                cur = np.asarray(current, dtype=float).ravel()
-                if cur.shape not in ((2,), (3,)) or not np.all(np.isfinite(cur)):
-                    raise ParameterError(f"current = {current!r} must be 2 or 3 finite numbers (m/s, world frame)")
-                cur3 = np.zeros(3)
-                cur3[: cur.size] = cur
-                _pm.set_water(spec, current=_pm.fmt(cur3))
-                spec.option.wind = cur3  # MuJoCo's own fluid model (drag="mujoco") sees it too
+                _pm.set_water(spec, **water)
+                spec.option.wind = wind  # MuJoCo's own fluid model (drag="mujoco") sees it too
             _pm.set_water(spec, terms=water_terms(terms))
+            if payload is not None:
+                site = payload.site or tip_site or next(
+                    (x.name for x in spec.sites if x.name and x.name.endswith("tip")), None)
+                if site is None:
+                    raise ParameterError("payload: the robot has no tip site; give payload.site")
+                payload.add_to(spec, site)
             self.model = _pm.compile_spec(spec, native=native, source=path.name)
         except _pm.ModelError as exc:
             raise ParameterError(str(exc)) from None
@@ -273,24 +293,69 @@ class Plant:
         #: The hydrodynamics backend in use: "native" or "python".
         self.backend = "native" if native else "python"
         self.hydro_info = _pm.hydro_of(m)
-
-        self.params: RobotParams = read_params(m)
+        #: The named pieces of the model (:class:`~uvms_mj.plant.layout.Layout`).
+        self.layout = lay = Layout.of(m, tip_site, allow_planar=True)
+        #: The paper robot's planar parameters (:class:`~uvms_mj.plant.params.RobotParams`) for a
+        #: planar robot that has them, else None.
+        self.params: RobotParams | None = None
+        if not lay.base_free and all(mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, b) >= 0
+                                     for b in _params.HYDRO_BODIES):
+            self.params = read_params(m)  # the paper's robot: its parameters checked (raises)
         self.terms = terms
-        self.dead_zone = bool(dead_zone)
         self.max_speed = float(max_speed)
+        self.initial = initial if initial is not None else InitialState()
+        self.payload = payload
         self._configure_mujoco_drag(terms.drag == "mujoco")
 
         self.data = mujoco.MjData(m)
-        self._scratch = mujoco.MjData(m)  # for rigid-only quantities (energy)
-        ids = lambda obj, names: [mujoco.mj_name2id(m, obj, n) for n in names]  # noqa: E731
-        self._thr = np.array(ids(mujoco.mjtObj.mjOBJ_ACTUATOR, THRUSTERS))
-        self._mot = np.array(ids(mujoco.mjtObj.mjOBJ_ACTUATOR, JOINT_MOTORS))
-        self._thr_act = m.actuator_actadr[self._thr]
-        self._thr_lo, self._thr_hi = m.actuator_forcerange[self._thr].T.copy()
-        self._tip = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, TIP_SITE)
-        self._body_ids = ids(mujoco.mjtObj.mjOBJ_BODY, [b.name for b in self.params.bodies])
-        if list(m.M_rownnz) != [1, 2, 3, 4, 5] or list(m.M_colind) != [c for r in range(5) for c in range(r + 1)]:
+        self._scratch = mujoco.MjData(m)  # for rigid-only quantities (energy) and the tip
+        self._thr = lay.thruster_ids
+        self._mot = lay.motor_ids
+        self._thr_act = np.array([m.actuator_actadr[a] for a in self._thr], dtype=int)
+        self._thr_lagged = bool(len(self._thr)) and bool(np.all(self._thr_act >= 0))
+        self._thr_lo, self._thr_hi = (m.actuator_forcerange[self._thr].T.copy() if len(self._thr)
+                                      else (np.zeros(0), np.zeros(0)))
+        self._curves = thruster_curves(m) if len(self._thr) else []
+        #: Every thruster's force is its command (unit-gain actuators, the paper's): the command
+        #: is the thrust in newtons, no curve to invert.
+        self._direct = all(c.kind == "poly" and tuple(c.coeffs) == (0.0, 1.0) for c in self._curves)
+        groups: dict = {}  # thrusters sharing a curve and command range are inverted together
+        for k, (c, a) in enumerate(zip(self._curves, self._thr)):
+            rng = tuple(m.actuator_ctrlrange[a]) if m.actuator_ctrllimited[a] else (None, None)
+            groups.setdefault((c, rng), []).append(k)
+        self._groups = [(np.array(ks), c, CurveInverse(c, *rng)) for (c, rng), ks in groups.items()]
+        self.dead_zone = dead_zone is not False and dead_zone is not None
+        if dead_zone is True:
+            if self.params is None:
+                raise ParameterError("dead_zone = True needs the paper robot's parameters; give the band "
+                                     "(low, high) [N]")
+            self._dead_band = tuple(float(v) for v in self.params.dead_zone)
+        elif self.dead_zone:
+            band = np.asarray(dead_zone, dtype=float).ravel()
+            if band.shape != (2,) or not np.all(np.isfinite(band)) or not band[0] <= 0 <= band[1]:
+                raise ParameterError(f"dead_zone = {dead_zone!r}: expected (low, high) [N] with low <= 0 <= high")
+            self._dead_band = (float(band[0]), float(band[1]))
+        self._tip = lay.tip_site
+        self._tip_axes = list(lay.plane_axes)
+        self._body_ids = ([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, b.name) for b in self.params.bodies]
+                          if self.params is not None else list(range(1, m.nbody)))
+        if self.params is not None and (list(m.M_rownnz) != [1, 2, 3, 4, 5]
+                                        or list(m.M_colind) != [c for r in range(5) for c in range(r + 1)]):
             raise ParameterError("the mass matrix must be dense 5x5 (a planar chain of 5 dofs)")
+        names = list(lay.thruster_names)
+        self.failures = tuple(failures)
+        for f in self.failures:
+            if f.thruster not in names:
+                import difflib
+
+                close = difflib.get_close_matches(str(f.thruster), names, n=1, cutoff=0.6)
+                hint = f" (did you mean {close[0]!r}?)" if close else ""
+                raise ParameterError(f"failure of thruster {f.thruster!r}: no thruster of that name{hint}; "
+                                     f"thrusters: {', '.join(names) or 'none'}")
+            if not (math.isfinite(f.t) and f.t >= 0):
+                raise ParameterError(f"failure of thruster {f.thruster!r} at t = {f.t!r}: t must be finite and >= 0 s")
+        self._forcerange0 = m.actuator_forcerange.copy()
+        self._forcelimited0 = m.actuator_forcelimited.copy()
 
         self._diverged: tuple[float, str] | None = None
         self._serving: dict[int, _pyb.Served] = {}  # Python backend: mjData address -> its server
@@ -301,11 +366,12 @@ class Plant:
     # ---------------------------------------------------------------- hydrodynamics hook
 
     def _configure_mujoco_drag(self, on: bool) -> None:
-        """MuJoCo's ellipsoid model as the drag: density on, its virtual mass/inertia zeroed
-        (added mass is ours, exact; MuJoCo would add only its velocity terms)."""
+        """MuJoCo's ellipsoid model as the drag (the paper robot's model mismatch): density on,
+        its virtual mass/inertia zeroed (added mass is ours, exact; MuJoCo would add only its
+        velocity terms). Off: MuJoCo's fluid model off (density and viscosity 0)."""
         m = self.model
-        robot_geoms = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, b.name) for b in self.params.bodies]
         if on:
+            robot_geoms = [mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_GEOM, b.name) for b in self.params.bodies]
             m.opt.density = self.params.rho
             for g in robot_geoms:
                 if m.geom_fluid[g, 0] <= 0:
@@ -351,21 +417,60 @@ class Plant:
 
     # ---------------------------------------------------------------- state
 
-    def reset(self, keyframe: str | None = "paper_initial") -> None:
-        """Reset time, state and thruster activations; optionally to a model keyframe."""
+    def reset(self, keyframe: Any = _RESET_TO_INITIAL) -> None:
+        """Reset time, state, thruster activations and scheduled events: to the plant's
+        :attr:`initial` state (default), to ``qpos0`` (``keyframe=None``) or to a named model
+        keyframe.
+
+        Raises:
+            ParameterError: no keyframe of that name; a reset after the payload was picked up."""
         m, d = self.model, self.data
-        if keyframe is None:
+        if getattr(self, "_picked", False):
+            raise ParameterError("reset after the payload was picked up: create a new Plant")
+        self._picked = False
+        self._failed: set[str] = set()
+        if not np.array_equal(m.actuator_forcerange, self._forcerange0):  # a failure happened: undo it
+            m.actuator_forcerange[:] = self._forcerange0
+            m.actuator_forcelimited[:] = self._forcelimited0
+            self._thr_lo, self._thr_hi = (m.actuator_forcerange[self._thr].T.copy() if len(self._thr)
+                                          else (np.zeros(0), np.zeros(0)))
+            self.__dict__.pop("_io", None)
+        if keyframe is _RESET_TO_INITIAL:
+            self.initial.apply(m, d, self.layout)
+        elif keyframe is None:
             mujoco.mj_resetData(m, d)
         else:
             k = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, keyframe)
             if k < 0:
                 raise ParameterError(f"model has no keyframe named {keyframe!r}")
             mujoco.mj_resetDataKeyframe(m, d, k)
+        d.time = 0.0
         self._diverged = None
         served = self._serving.get(d._address)
         if served is not None:
             served.reset(float(d.time))
         mujoco.mj_forward(m, d)
+
+    def on_sample(self, t: float) -> None:
+        """Called by the sampled loop at every control sample (time t [s]): the scheduled events
+        (the payload's pick-up, thruster failures)."""
+        if self.payload is not None and not self._picked and t >= self.payload.t - 1e-12:
+            self.payload.apply(self.model)
+            self._picked = True
+            mujoco.mj_forward(self.model, self.data)
+        for f in self.failures:
+            if f.thruster not in self._failed and t >= f.t - 1e-12:
+                self._fail(f.thruster)
+
+    def _fail(self, name: str) -> None:
+        m = self.model
+        a = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, name)
+        m.actuator_forcerange[a] = (0.0, 0.0)
+        m.actuator_forcelimited[a] = 1
+        k = list(self._thr).index(a)
+        self._thr_lo[k] = self._thr_hi[k] = 0.0
+        self._failed.add(name)
+        self.__dict__.pop("_io", None)  # the compiled sample copies the limits: rebuild it
 
     def set_state(
         self,
@@ -373,25 +478,37 @@ class Plant:
         joint_angles: Sequence[float] | None = None,
         base_velocity: Sequence[float] | None = None,
         joint_velocities: Sequence[float] | None = None,
+        *,
+        qpos: Sequence[float] | None = None,
+        qvel: Sequence[float] | None = None,
     ) -> None:
         """Set (parts of) the state and recompute derived quantities (``mj_forward``).
 
-        base_pose: (p0x, p0y, phi0) world [m, m, rad]; joint_angles: (phi1, phi2) [rad];
-        base_velocity: (p0x_dot, p0y_dot, phi0_dot) world; joint_velocities: (phi1_dot, phi2_dot).
+        ``qpos`` / ``qvel``: the whole of MuJoCo's (module docstring), applied first; then
+        base_pose: the base's qpos (planar: (p0x, p0y, phi0) world [m, m, rad]; free: (x, y, z,
+        qw, qx, qy, qz)); joint_angles: the arm joints' [rad]; base_velocity: the base's qvel
+        (planar: world; free: linear world, angular body); joint_velocities: the arm's rates.
+
+        Raises:
+            ValueError: a part of the wrong size or not finite.
         """
-        d = self.data
-        for name, val, arr, sl in (
-            ("base_pose", base_pose, d.qpos, slice(0, 3)),
-            ("joint_angles", joint_angles, d.qpos, slice(3, 5)),
-            ("base_velocity", base_velocity, d.qvel, slice(0, 3)),
-            ("joint_velocities", joint_velocities, d.qvel, slice(3, 5)),
+        d, lay = self.data, self.layout
+        nb = lay.base_nq
+        for name, val, arr, idx in (
+            ("qpos", qpos, d.qpos, slice(None)),
+            ("qvel", qvel, d.qvel, slice(None)),
+            ("base_pose", base_pose, d.qpos, slice(lay.base_qadr, lay.base_qadr + nb)),
+            ("joint_angles", joint_angles, d.qpos, lay.joint_qadr),
+            ("base_velocity", base_velocity, d.qvel, slice(lay.base_dadr, lay.base_dadr + lay.base_dofs.size)),
+            ("joint_velocities", joint_velocities, d.qvel, lay.joint_dadr),
         ):
             if val is None:
                 continue
+            n = arr[idx].size
             v = np.asarray(val, dtype=float).ravel()
-            if v.shape != (sl.stop - sl.start,) or not np.all(np.isfinite(v)):
-                raise ValueError(f"{name} = {val!r} must be {sl.stop - sl.start} finite numbers")
-            arr[sl] = v
+            if v.shape != (n,) or not np.all(np.isfinite(v)):
+                raise ValueError(f"{name} = {val!r} must be {n} finite numbers")
+            arr[idx] = v
         mujoco.mj_forward(self.model, d)
 
     @property
@@ -401,75 +518,120 @@ class Plant:
 
     @property
     def q(self) -> np.ndarray:
-        """Generalized coordinates (p0x, p0y, phi0, phi1, phi2) [m, m, rad, rad, rad] (copy)."""
+        """Generalized coordinates ``qpos`` (copy; module docstring): the paper's
+        (p0x, p0y, phi0, phi1, phi2) [m, m, rad, rad, rad]."""
         return self.data.qpos.copy()
 
     @property
     def qd(self) -> np.ndarray:
-        """Generalized velocities (world-frame base velocity, joint rates) (copy)."""
+        """Generalized velocities ``qvel`` (copy): base velocity (planar: world; free: linear
+        world, angular body), joint rates."""
         return self.data.qvel.copy()
 
     @property
     def base_pose(self) -> np.ndarray:
-        """(p0x, p0y, phi0): base position (world, m) and attitude (rad)."""
-        return self.data.qpos[0:3].copy()
+        """The base's qpos (copy): planar (p0x, p0y, phi0) world [m, m, rad]; free (x, y, z [m]
+        world, qw, qx, qy, qz)."""
+        a = self.layout.base_qadr
+        return self.data.qpos[a:a + self.layout.base_nq].copy()
 
     @property
     def joint_angles(self) -> np.ndarray:
-        """(phi1, phi2): relative joint angles [rad]."""
-        return self.data.qpos[3:5].copy()
+        """Arm joint angles [rad] in :attr:`Layout.joint_names` order (copy): the paper's
+        (phi1, phi2), relative angles."""
+        return self.data.qpos[self.layout.joint_qadr].copy()
 
     @property
     def tip_position(self) -> np.ndarray:
-        """End-tip position (x, y) in the world frame [m] at the current state.
+        """End-effector site position, world [m], along :attr:`Layout.plane_axes` (the paper's:
+        (x, y); a free vehicle's: (x, y, z)); NaN when the robot has no tip site.
 
         Computed from ``data.qpos`` (on a scratch MjData): after ``mj_step`` MuJoCo's own
         ``site_xpos`` still holds the start of the step (Euler) or an intermediate RK4 stage."""
+        if self._tip < 0:
+            return np.full(len(self._tip_axes), np.nan)
         s = self._scratch
         s.qpos[:] = self.data.qpos
         mujoco.mj_kinematics(self.model, s)
-        return s.site_xpos[self._tip, :2].copy()
+        return s.site_xpos[self._tip, self._tip_axes]
 
     @property
     def thruster_forces(self) -> np.ndarray:
-        """Actual thrust of each thruster along its axis [N] at the current time: the lag state,
-        clamped to the force range (``data.actuator_force`` holds the value at the start of the
-        last step)."""
-        return np.minimum(np.maximum(self.data.act[self._thr_act], self._thr_lo), self._thr_hi)
+        """Actual thrust of each thruster along its axis [N] now: the thrust curve at the lag
+        state (the command without a lag), clamped to the force range (``data.actuator_force``
+        holds the value at the start of the last step)."""
+        if not len(self._thr):
+            return np.zeros(0)
+        if self._direct and self._thr_lagged:
+            return np.minimum(np.maximum(self.data.act[self._thr_act], self._thr_lo), self._thr_hi)
+        u = self.data.act[self._thr_act] if self._thr_lagged else self.data.ctrl[self._thr]
+        f = np.empty(u.size)
+        for ks, c, _ in self._groups:
+            f[ks] = c(u[ks])
+        return np.clip(f, self._thr_lo, self._thr_hi)
 
     @property
     def thruster_commands(self) -> np.ndarray:
-        """Commanded thrust of each thruster [N] (after the optional dead zone)."""
+        """The thrusters' actuator commands (``ctrl``: newtons for unit-gain thrusters, after the
+        optional dead zone; else the actuator's units, e.g. a normalised voltage)."""
         return self.data.ctrl[self._thr].copy()
+
+    def thrust_to_ctrl(self, thrust: Sequence[float]) -> np.ndarray:
+        """Actuator commands for thrusts [N] (the thrust itself for unit-gain thrusters; else
+        the inverse of the model's curve, clamped)."""
+        f = np.asarray(thrust, dtype=float).ravel()
+        if self._direct:
+            return f.copy()
+        u = np.empty(f.size)
+        for ks, _, inv in self._groups:
+            u[ks] = inv(f[ks])
+        return u
+
+    def warm_start(self, thrust: Sequence[float]) -> None:
+        """Start the thrusters' lag states at ``thrust`` [N] (holding station when the run
+        starts): the lag state of a unit-gain thruster is its force (clamped to the range), a
+        curve thruster's its command."""
+        if not self._thr_lagged:
+            return
+        if self._direct:
+            self.data.act[self._thr_act] = np.clip(np.asarray(thrust, dtype=float), self._thr_lo, self._thr_hi)
+        else:
+            self.data.act[self._thr_act] = self.thrust_to_ctrl(thrust)
 
     # ---------------------------------------------------------------- inputs
 
     def set_thrust(self, commands: Sequence[float]) -> None:
-        """Command the three thrusters [N along each thruster's axis], held until changed.
-
-        MuJoCo clamps the command to the force range and lags it by tau (first order).
-        With ``dead_zone`` on, commands inside the dead zone give no thrust.
-        """
-        self.data.ctrl[self._thr] = self._thrust_ctrl(commands)
+        """Command each thruster's thrust [N along its axis] (:attr:`Layout.thruster_names`
+        order), held until changed. MuJoCo clamps the force to the force range and lags it
+        (first order) where the model says so; with ``dead_zone`` on, commands inside the dead
+        zone give no thrust."""
+        u = self._thrust_ctrl(commands)
+        if u.size:
+            self.data.ctrl[self._thr] = u
 
     def _thrust_ctrl(self, commands: Sequence[float], finite: bool = False) -> np.ndarray:
         """The thrusters' actuator commands for thrusts [N] (checked; the dead zone applied)."""
         c = np.asarray(commands, dtype=float)
-        if c.shape != (3,) or not (finite or _finite(c)):
-            raise ValueError(f"thruster commands {commands!r} must be 3 finite numbers [N]")
+        n = len(self._thr)
+        if c.shape != (n,) or not (finite or _finite(c)):
+            raise ValueError(f"thruster commands {commands!r} must be {n} finite numbers [N]")
         if self.dead_zone:
-            lo, hi = self.params.dead_zone
+            lo, hi = self._dead_band
             c = np.where((c > lo) & (c < hi), 0.0, c)
-        return c
+        return c if self._direct else self.thrust_to_ctrl(c)
 
     def set_joint_torques(self, torques: Sequence[float]) -> None:
-        """Command the two joint torques [N m], held until changed."""
-        self.data.ctrl[self._mot] = self._torque_ctrl(torques)
+        """Command the joint actuators (:attr:`Layout.motor_names` order) [N m], held until
+        changed."""
+        t = self._torque_ctrl(torques)
+        if t.size:
+            self.data.ctrl[self._mot] = t
 
     def _torque_ctrl(self, torques: Sequence[float], finite: bool = False) -> np.ndarray:
         t = np.asarray(torques, dtype=float)
-        if t.shape != (2,) or not (finite or _finite(t)):
-            raise ValueError(f"joint torques {torques!r} must be 2 finite numbers [N m]")
+        n = len(self._mot)
+        if t.shape != (n,) or not (finite or _finite(t)):
+            raise ValueError(f"joint torques {torques!r} must be {n} finite numbers [N m]")
         return t
 
     def observe(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
@@ -479,8 +641,9 @@ class Plant:
     def command(self, thrust: Sequence[float], torques: Sequence[float], *, finite: bool = False) -> None:
         """:meth:`set_thrust` and :meth:`set_joint_torques` at once (each checked first; with
         ``finite`` the caller has checked that every value is finite, as the sampled loop does)."""
-        if finite and not self.dead_zone and type(thrust) is type(torques) is np.ndarray \
-                and thrust.shape == (3,) and torques.shape == (2,) and thrust.dtype == torques.dtype == np.float64:
+        if finite and self._direct and not self.dead_zone and type(thrust) is type(torques) is np.ndarray \
+                and thrust.shape == (len(self._thr),) and torques.shape == (len(self._mot),) \
+                and thrust.dtype == torques.dtype == np.float64:
             c, t = thrust, torques  # what _thrust_ctrl and _torque_ctrl give them
         else:
             c, t = self._thrust_ctrl(thrust, finite), self._torque_ctrl(torques, finite)
@@ -502,183 +665,12 @@ class Plant:
             return np.asarray(idx, dtype=int)
         return as_slice(self._thr), as_slice(self._mot)
 
-    def step_observe(self, n: int = 1):
-        """:meth:`step` (n) and the new state: (q, qd, tip_position, thruster forces or None --
-        None where the forces follow the commands: read :attr:`thruster_forces` after the next
-        :meth:`command`). Native backend: through the compiled sample
-        (:mod:`uvms_mj.physics.plant_io`: the same steps, checks and numbers)."""
-        io = self.__dict__.get("_io")
-        if io is None or io.data is not self.data or io.model is not self.model:
-            io = self._plant_io()
-            if io is None:
-                self.step(n)
-                q, qd, tip, thr = self.observe()
-                return q, qd, tip, thr if self._io_layout()[4] is not None else None
-        if self._diverged is not None or _pyb._FAILURES:
-            self._check()
-        rc = io.run(n, self.max_speed) if self._diverged is None else 2
-        if rc == 0:
-            o = io.out.copy()
-            s = io.slices
-            return o[s[0]], o[s[1]], (o[s[2]] if s[2] is not None else self.tip_position), \
-                (o[s[3]] if s[3] is not None else None)
-        if rc == 1:
-            mujoco.mj_setState(self.model, self.data, io.snapshot, _SNAPSHOT)  # replay step by step
-        else:  # a state set from outside since the last step: recorded, then stepped as by step()
-            self._check_state()
-        self._step_each(n, None)
-        self._check_state()
-        self._check()
-        q, qd, tip, thr = self.observe()
-        return q, qd, tip, thr if io.nthr else None
-
-    def _plant_io(self):
-        """The compiled sample's arrays for this plant (None: the Python methods run)."""
-        io = self.__dict__.get("_io")
-        if io is not None and io.data is self.data and io.model is self.model:
-            return io
-        if self.__dict__.get("_io_tried") is self.data or self._serving.get(self.data._address) is not None:
-            return None
-        from uvms_mj.physics import plant_io
-
-        self._io_tried = self.data
-        fn = plant_io.library()
-        if fn is None:
-            return None
-        m = self.model
-        if self._snapshot is None:
-            self._snapshot = np.empty(mujoco.mj_stateSize(m, _SNAPSHOT))
-        tip_site, ntip, thr_act, lo, hi = self._io_layout()
-        io = self._io = plant_io.PlantIO(fn, m, self.data, self._scratch, self._snapshot, int(_SNAPSHOT), tip_site,
-                                         ntip, () if thr_act is None else thr_act, () if lo is None else lo,
-                                         () if hi is None else hi)
-        return io
-
     def _io_layout(self) -> tuple:
-        """(tip_site, ntip, thr_act, lo, hi) of :class:`uvms_mj.physics.plant_io.PlantIO`: the tip's
-        (x, y); the thrust = the lag state clamped to the force range (None: it follows the
-        commands, the plant computes it)."""
-        return self._tip, 2, self._thr_act, self._thr_lo, self._thr_hi
-
-    # ---------------------------------------------------------------- stepping
-
-    def step(self, n: int = 1) -> None:
-        """Advance n physics steps.
-
-        Native backend: the n steps run in one ``mj_step(m, d, nstep=n)`` from a saved state;
-        if the batch shows a problem (a MuJoCo reset, a non-finite or runaway state), the state is
-        restored and the steps are replayed one by one, so that the divergence is reported at the
-        step where it happened (the time at the end of that step; a MuJoCo reset: at its start),
-        whatever n.
-
-        Raises:
-            DivergenceError: the state became non-finite or exceeded ``max_speed``; the message
-                says at what time. The plant must be reset before stepping again.
-        """
-        m, d = self.model, self.data
-        self._check()
-        self._check_state()
-        served = self._serving.get(d._address)
-        if served is None and n > 1 and self._diverged is None:
-            snap = self._snapshot
-            if snap is None:
-                snap = self._snapshot = np.empty(mujoco.mj_stateSize(m, _SNAPSHOT))
-            mujoco.mj_getState(m, d, snap, _SNAPSHOT)
-            dt = m.opt.timestep
-            t_end = d.time + n * dt
-            mujoco.mj_step(m, d, nstep=n)
-            # a MuJoCo reset (bad qpos/qvel/qacc) restarts time: the clock tells it
-            if abs(d.time - t_end) < 0.5 * dt:
-                self._check_state()
-                if self._diverged is None:
-                    return
-                self._diverged = None
-            mujoco.mj_setState(m, d, snap, _SNAPSHOT)  # replay step by step: the exact report
-        self._step_each(n, served)
-        self._check_state()
-        self._check()
-
-    def _step_each(self, n: int, served) -> None:
-        m, d = self.model, self.data
-        step = mujoco.mj_step
-        t = d.time
-        check = self._check_state
-        if served is None:
-            for _ in range(n):
-                step(m, d)
-                if d.time <= t:
-                    break
-                t = d.time
-                check()  # a runaway is reported at the step where it happens
-                if self._diverged is not None:
-                    break
-        else:
-            advance = served.advance
-            for _ in range(n):
-                step(m, d)
-                if d.time <= t or _pyb._FAILURES:
-                    break
-                t = d.time
-                advance(t)
-                check()
-                if self._diverged is not None:
-                    break
-        # MuJoCo resets the state itself on a bad qpos/qvel/qacc (and restarts time): never let
-        # that pass silently. t is the time at the start of the step that failed.
-        for w in (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQVEL, mujoco.mjtWarning.mjWARN_BADQPOS):
-            if d.warning[w].number > 0 and self._diverged is None:
-                self._diverged = (float(t), f"non-finite or huge state ({w.name}; MuJoCo reset the state)")
-
-    def _check_state(self) -> None:
-        """Record a divergence of the current state (non-finite, or sum |q_dot| > max_speed)."""
-        if self._diverged is not None:
-            return
-        d = self.data
-        speed = sum(map(abs, d.qvel.tolist()))  # plain floats: cheaper than numpy at these sizes
-        if not (speed <= self.max_speed and math.isfinite(sum(d.qpos.tolist()))):
-            finite = bool(np.all(np.isfinite(d.qpos)) and np.all(np.isfinite(d.qvel)))
-            what = "non-finite state (NaN or inf)" if not finite else (
-                f"runaway: sum |q_dot| = {speed:.3g} > max_speed = {self.max_speed:g}")
-            self._diverged = (float(d.time), what)
-
-    def _check(self) -> None:
-        exc = _pyb.failure(self.data)
-        if exc is not None:
-            raise RuntimeError(f"the hydrodynamics callback failed at t = {self.time:.4f} s: {exc!r}") from exc
-        if self._diverged is not None:
-            raise DivergenceError(*self._diverged)
-
-    # ---------------------------------------------------------------- diagnostics
-
-    def energy(self) -> Energy:
-        """Kinetic (rigid and added) and potential (gravity and buoyancy) energy [J]."""
-        m, d, s = self.model, self.data, self._scratch
-        s.qpos[:] = d.qpos
-        s.qvel[:] = d.qvel
-        s.time = d.time
-        mujoco.mj_fwdPosition(m, s)  # the rigid mass matrix (the passive stage is not run)
-        mujoco.mj_comVel(m, s)
-        mq = np.zeros(m.nv)
-        mujoco.mj_mulM(m, s, mq, s.qvel)
-        rigid = 0.5 * float(s.qvel @ mq)
-        info = self.hydro_info
-        served = self._serving.get(d._address)
-        state = served.current_state if served is not None else _pm.current_state_of(m, d)
-        added = (_ref.added_kinetic_energy(m, s, info.water, info.bodies, current_state=state)
-                 if self.terms.added_mass != "off" else 0.0)
-        g = m.opt.gravity
-        pot_g = -sum(m.body_mass[b] * float(g @ s.xipos[b]) for b in self._body_ids)
-        pot_b = 0.0
-        if self.terms.buoyancy:
-            rho = float(info.water.density)
-            for b, bh in info.bodies.items():
-                cob = s.xpos[b] + s.xmat[b].reshape(3, 3) @ np.asarray(bh.cob, dtype=float)
-                pot_b += rho * float(bh.volume) * float(g @ cob)
-        return Energy(rigid, added, float(pot_g), float(pot_b))
-
-    def mass_matrix(self) -> np.ndarray:
-        """Full 5x5 generalized mass matrix at the current state, added mass included."""
-        mujoco.mj_forward(self.model, self.data)
-        out = np.zeros((self.model.nv, self.model.nv))
-        mujoco.mj_fullM(self.model, self.data, out)
-        return out
+        """(tip_site, ntip, thr_act, lo, hi) of :class:`uvms_mj.physics.plant_io.PlantIO`: the
+        tip's coordinates along the plane axes (the first ``ntip`` of its world position); the
+        thrust = the lag state clamped to the force range for unit-gain lagged thrusters (else
+        None: the plant computes it through the curves)."""
+        ntip = len(self._tip_axes) if self._tip >= 0 and self._tip_axes in ([0, 1], [0, 1, 2]) else 0
+        if self._direct and self._thr_lagged:
+            return max(self._tip, 0), ntip, self._thr_act, self._thr_lo, self._thr_hi
+        return max(self._tip, 0), ntip, None, None, None

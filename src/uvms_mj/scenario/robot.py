@@ -2,7 +2,7 @@
 
 A scenario whose ``robot`` field names a built-in robot other than the paper's
 (:data:`uvms_mj.plant.robot.BUILTIN_ROBOTS`) or an MJCF file is validated by :class:`RobotScenario`
-and runs on :class:`uvms_mj.plant.robot.RobotPlant`. Every section rejects unknown keys and names the
+and runs on :class:`uvms_mj.plant.plant.Plant`. Every section rejects unknown keys and names the
 field, the value and what is allowed; element names (bodies, joints, actuators, keyframes) are
 checked against the model with did-you-mean suggestions. Units SI unless the field says
 otherwise; world frame z up.
@@ -68,28 +68,29 @@ from uvms_mj.planar.hydro import HydroTerms
 from uvms_mj.sim.loop import RunResult, run_closed_loop
 from uvms_mj.control.nominal import JointTrajectory, NominalRobot
 from uvms_mj.plant.params import ParameterError
-from uvms_mj.plant.robot import InitialState, Layout, RobotPlant, compile_robot_spec, robot_path
-from uvms_mj.rotations import quat_from_rpy
+from uvms_mj.plant.files import robot_path
+from uvms_mj.plant.layout import Layout
+from uvms_mj.plant.plant import Plant
+from uvms_mj.plant.robot import compile_robot_spec
 
 #: Default controller period [s]: 50 Hz, a whole multiple of the BlueROV2 models' 2 ms step
 #: (the paper's 1/60 s is not); every controller of a robot scenario runs at it.
 DEFAULT_PERIOD = 0.02
 
-#: Bounds (as the paper scenario's).
-POSITION_MAX = 1000.0  # [m] |initial.position|
-VELOCITY_MAX = 10.0  # [m/s], [rad/s] initial velocities
-CURRENT_MAX = 10.0  # [m/s]
-
-
 from uvms_mj.scenario import schema as _S  # noqa: E402  (the shared sections and helpers)
+from uvms_mj.scenario.sections import (  # noqa: E402
+    CurrentSection,
+    Failure,
+    Initial,
+    Vehicle,
+    vehicle_issues,
+    vehicle_params,
+)
 
 _Section = _S._Section
 _Issues = _S._Issues
 _NO_VALUE = _S._NO_VALUE
 _suggest = _S._suggest
-
-Vec3 = Annotated[list[Annotated[float, Field(ge=-POSITION_MAX, le=POSITION_MAX)]], Field(min_length=3, max_length=3)]
-Vel3 = Annotated[list[Annotated[float, Field(ge=-VELOCITY_MAX, le=VELOCITY_MAX)]], Field(min_length=3, max_length=3)]
 
 
 def _model_of(robot: str, base_dir: str | None):
@@ -106,53 +107,6 @@ def _compiled(path: str):
         m = compile_robot_spec(path)
         _CACHE[path] = (m, Layout.of(m))
     return _CACHE[path]
-
-
-class Orientation(_Section):
-    """The vehicle's initial orientation: a quaternion or roll/pitch/yaw (not both)."""
-
-    quat: Annotated[list[float], Field(min_length=4, max_length=4)] | None = Field(
-        None, description="[w, x, y, z], normalised")
-    rpy: Annotated[list[Annotated[float, Field(ge=-720, le=720)]], Field(min_length=3, max_length=3)] | None = Field(
-        None, description="roll, pitch, yaw in initial.angle_unit (z-y-x convention)")
-
-    @model_validator(mode="after")
-    def _one(self) -> "Orientation":
-        if self.quat is not None and self.rpy is not None:
-            raise _Issues([((), "give either quat or rpy, not both", {"quat": self.quat, "rpy": self.rpy})])
-        if self.quat is not None and float(np.linalg.norm(self.quat)) < 1e-9:
-            raise _Issues([(("quat",), "must not be zero", self.quat)])
-        return self
-
-
-class Initial(_Section):
-    """The initial state (every field optional)."""
-
-    keyframe: str | None = Field(None, description="a model keyframe to start from")
-    position: Vec3 | None = Field(None, description="vehicle origin, world [m]")
-    orientation: Orientation | None = None
-    joints: dict[str, float] = Field(default_factory=dict, description="joint name -> angle [angle_unit]")
-    angle_unit: Literal["deg", "rad"] = Field("deg", description="unit of rpy, joints and joint_velocities")
-    linear_velocity: Vel3 | None = Field(None, description="world [m/s]")
-    angular_velocity: Vel3 | None = Field(None, description="body frame [rad/s]")
-    joint_velocities: dict[str, float] = Field(default_factory=dict, description="joint name -> [angle_unit/s]")
-
-    def state(self) -> InitialState:
-        """As :class:`uvms_mj.plant.robot.InitialState` (radians)."""
-        k = math.pi / 180.0 if self.angle_unit == "deg" else 1.0
-        quat = None
-        if self.orientation is not None:
-            if self.orientation.quat is not None:
-                quat = tuple(self.orientation.quat)
-            elif self.orientation.rpy is not None:
-                quat = tuple(quat_from_rpy(*(k * v for v in self.orientation.rpy)))
-        return InitialState(
-            position=tuple(self.position) if self.position is not None else None, quat=quat,
-            joints={n: k * v for n, v in self.joints.items()},
-            linear_velocity=tuple(self.linear_velocity) if self.linear_velocity is not None else None,
-            angular_velocity=tuple(self.angular_velocity) if self.angular_velocity is not None else None,
-            joint_velocities={n: k * v for n, v in self.joint_velocities.items()},
-            keyframe=self.keyframe)
 
 
 class Waypoint(_Section):
@@ -209,8 +163,25 @@ class RobotPlantSection(_Section):
     hydro: RobotHydro = Field(default_factory=RobotHydro)
     gravity: bool = True
     payload: PayloadSection | None = Field(None, description="a payload picked up during the run")
-    current: Annotated[list[Annotated[float, Field(ge=-CURRENT_MAX, le=CURRENT_MAX)]],
+    current: Annotated[list[Annotated[float, Field(ge=-_S.CURRENT_MAX, le=_S.CURRENT_MAX)]],
                        Field(min_length=3, max_length=3)] | None = Field(None, description="world [vx, vy, vz] m/s")
+
+
+class RobotThrusters(_Section):
+    """The plant's thrusters (the controller allocates with the nominal model's, as if ideal);
+    null: the model file's."""
+
+    tau: float | None = Field(None, ge=0, le=_S.TAU_MAX, description="first-order lag [s] of every thruster")
+    dead_zone: Annotated[list[float], Field(min_length=2, max_length=2)] | None = Field(
+        None, description="[low, high] command band giving no thrust (the thruster plugin's command units)")
+    force_range: Annotated[list[Annotated[float, Field(ge=-_S.FORCE_MAX, le=_S.FORCE_MAX)]],
+                           Field(min_length=2, max_length=2)] | None = Field(None, description="[min, max] [N]")
+    failures: list[Failure] = Field(default_factory=list, description="thrusters failing during the run")
+
+    def overrides(self) -> dict:
+        """As ``thrusters.*`` overrides (:func:`uvms_mj.plant.robot.apply_overrides`)."""
+        return {f"thrusters.{k}": v for k, v in (("tau", self.tau), ("dead_zone", self.dead_zone),
+                                                ("forcerange", self.force_range)) if v is not None}
 
 
 class RobotNominalSection(_Section):
@@ -265,6 +236,10 @@ class RobotScenario(_Section):
     control_period: float = Field(DEFAULT_PERIOD, ge=_S.PERIOD_RANGE[0], le=_S.PERIOD_RANGE[1],
                                   description="controller period T [s] of every controller (a whole multiple of "
                                   "the timestep)")
+    current: CurrentSection | None = Field(None, description="the water current (constant, gauss_markov, profile); "
+                                           "plant.current is the older spelling of a constant one")
+    thrusters: RobotThrusters = Field(default_factory=RobotThrusters)
+    vehicle: Vehicle = Field(default_factory=Vehicle)
     sensors: _S.Sensors = Field(default_factory=_S.Sensors)
     controller: RobotController = Field(default_factory=RobotController)
     controllers: dict[str, dict[str, Any]] = Field(default_factory=dict, description="per-controller parameters")
@@ -331,6 +306,20 @@ class RobotScenario(_Section):
                 issues.append((("trajectory",), f"robot {self.robot!r} has no end-effector site (tip_site)", _NO_VALUE))
         if self.arm.waypoints and not names:
             issues.append((("arm",), f"robot {self.robot!r} has no arm joints", _NO_VALUE))
+        if self.current is not None and self.plant.current is not None:
+            issues.append((("plant", "current"), "give the current in one place: the current section "
+                           "(current.velocity) or plant.current, not both", self.plant.current))
+        for key, value in self.thrusters.overrides().items():
+            try:
+                compile_robot_spec(path, {key: value})
+            except ParameterError as exc:
+                issues.append((("thrusters", key.partition(".")[2].replace("forcerange", "force_range")),
+                               str(exc).split(": ", 1)[-1], value))
+        for i, f in enumerate(self.thrusters.failures):
+            if f.thruster not in lay.thruster_names:
+                issues.append((("thrusters", "failures", i, "thruster"), f"not a thruster of {self.robot}"
+                               f"{_suggest(f.thruster, lay.thruster_names)}; thrusters: "
+                               f"{', '.join(lay.thruster_names) or 'none'}", f.thruster))
         # controller: registered, for floating robots, its parameters valid
         for name, params in self.controllers.items():
             if name not in floating_controllers():
@@ -360,6 +349,7 @@ class RobotScenario(_Section):
                 issues.append((("controller", "params") + sub, msg, value))
             if not found and not issues:
                 issues += _try_create(c.name, c.params, path)
+        issues += vehicle_issues(self.vehicle, self.controller.name, self.controller.params)
         if not issues:
             dt = self.physics.timestep or float(m.opt.timestep)
             T = controller_period(self)
@@ -402,6 +392,7 @@ def plant_overrides(sc: "RobotScenario") -> dict:
     if sc.plant.overrides_file is not None:
         over.update(read_overrides_file(sc.plant.overrides_file, sc.base_dir))
     over.update(sc.plant.overrides)
+    over.update(sc.thrusters.overrides())
     return over
 
 
@@ -453,7 +444,7 @@ def trajectory_of(sc: RobotScenario, tip0: np.ndarray):
     return starting_at(tr, tip0) if sc.trajectory_origin == "tip" else tr
 
 
-def robot_info(sc: RobotScenario, plant: RobotPlant | None = None) -> dict:
+def robot_info(sc: RobotScenario, plant: Plant | None = None) -> dict:
     """The run's robot for logs: {name, path, overrides, layout}."""
     path = robot_path(sc.robot, sc.base_dir)
     lay = plant.layout if plant is not None else _compiled(str(path))[1]
@@ -470,7 +461,7 @@ def resolved(sc: RobotScenario) -> dict:
     return _S._jsonable(d)
 
 
-def build(sc: RobotScenario) -> tuple[RobotPlant, Any]:
+def build(sc: RobotScenario) -> tuple[Plant, Any]:
     """The plant (truth) and the controller.
 
     Raises:
@@ -478,12 +469,14 @@ def build(sc: RobotScenario) -> tuple[RobotPlant, Any]:
     """
     try:
         ph, pl = sc.physics, sc.plant
-        plant = RobotPlant(
+        plant = Plant(
             robot_path(sc.robot, sc.base_dir), overrides=plant_overrides(sc),
             terms=HydroTerms(added_mass=pl.hydro.added_mass, drag=pl.hydro.drag, buoyancy=pl.hydro.buoyancy),
-            gravity=pl.gravity, current=pl.current, timestep=ph.timestep, integrator=ph.integrator,
+            gravity=pl.gravity, current=sc.current.current(sc.seed) if sc.current is not None else pl.current,
+            timestep=ph.timestep, integrator=ph.integrator,
             initial=sc.initial.state(), tip_site=sc.tip_site, backend=None if ph.backend == "auto" else ph.backend,
-            payload=pl.payload.payload() if pl.payload is not None else None)
+            payload=pl.payload.payload() if pl.payload is not None else None,
+            failures=[f.failure() for f in sc.thrusters.failures])
         nominal = NominalRobot(robot_path(sc.robot, sc.base_dir), sc.nominal.overrides, gravity=sc.nominal.gravity,
                                tip_site=sc.tip_site)
         arm = None
@@ -498,6 +491,7 @@ def build(sc: RobotScenario) -> tuple[RobotPlant, Any]:
         named, var_kw = _S._controller_signature(sc.controller.name)
         if "trajectory" in inspect.signature(_S._factory(sc.controller.name)).parameters or var_kw:
             params["trajectory"] = trajectory_of(sc, plant.tip_position)
+        params.update(vehicle_params(sc.vehicle, plant, sc.base_dir))
         ctrl = create(sc.controller.name, robot=nominal, arm_trajectory=arm, **params)
     except (ParameterError, ControllerError, ValueError, TypeError) as exc:
         raise _S.ScenarioError(f"scenario {sc.name!r}: {exc}") from None

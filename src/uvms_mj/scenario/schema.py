@@ -91,18 +91,17 @@ are applied to the raw mapping before validation; setting ``trajectory.target`` 
 from __future__ import annotations
 
 import copy
-import difflib
 import inspect
 import math
 import re
 from functools import lru_cache
 from pathlib import Path
-from typing import Annotated, Any, Callable, Iterable, Literal, Sequence
+from typing import Annotated, Any, Callable, Literal, Sequence
 
 import mujoco
 import numpy as np
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
+from pydantic import BaseModel, Field, ValidationError, field_validator, model_validator
 
 from uvms_mj.control import ControllerError, available, create
 from uvms_mj.planar.hydro import HydroTerms
@@ -118,6 +117,46 @@ from uvms_mj.plant.params import (
 )
 from uvms_mj.plant.plant import Plant, default_model_path, models_dir
 from uvms_mj.planar.trajectory import StraightLine
+from uvms_mj.scenario.base import (  # noqa: F401  (shared names, used here and by uvms_mj.scenario.robot)
+    _NO_VALUE,
+    ACCEL_MAX,
+    ANGLE_SIZE_MAX,
+    CURRENT_MAX,
+    DESCRIPTION_MAX,
+    DURATION_MAX,
+    FORCE_MAX,
+    LAG_STABILITY,
+    LENGTH_MAX,
+    NAME_MAX,
+    PARAM_ABS_MAX,
+    PERIOD_RANGE,
+    POSITION_SIZE_MAX,
+    SEED_MAX,
+    SIZE_MIN,
+    SPEED_MAX,
+    TAU_MAX,
+    TIMESTEP_RANGE,
+    VELOCITY_NOISE_MAX,
+    VIDEO_FPS_MAX,
+    VIDEO_SIZE_MAX,
+    ForceVec2,
+    LengthVec2,
+    Outputs,
+    ScenarioError,
+    Sensors,
+    Vec2,
+    _controller_signature,
+    _factory,
+    _has_bool,
+    _is_number,
+    _Issues,
+    _jsonable,
+    _non_finite,
+    _out_of_range,
+    _Section,
+    _suggest,
+    creation_errors,
+)
 
 __all__ = [
     "Scenario",
@@ -133,28 +172,6 @@ __all__ = [
     "run_scenario",
     "validate_scenario",
 ]
-
-
-class ScenarioError(ValueError):
-    """An invalid scenario: the message names the file, the field path, the bad value and what
-    is allowed (one line per problem)."""
-
-
-#: "no value to show" in an error line
-_NO_VALUE = object()
-
-
-class _Issues(ValueError):
-    """Raised inside validators: problems below the validator's own location.
-
-    ``items`` are (sub-path, message, value) triples (value ``_NO_VALUE``: not shown); the
-    formatter extends pydantic's location with the sub-path, so that e.g. the controller's own
-    error for ``gamma`` is reported at ``controller.params.gamma``.
-    """
-
-    def __init__(self, items: list[tuple[tuple, str, Any]]) -> None:
-        super().__init__("; ".join(f"{'.'.join(map(str, p)) or '.'}: {m}" for p, m, _ in items))
-        self.items = items
 
 
 # --------------------------------------------------------------------------- model-file defaults
@@ -199,52 +216,6 @@ OVERRIDE_NAMES: tuple[str, ...] = tuple(
 # --------------------------------------------------------------------------- helpers
 
 
-def _suggest(word: str, options: Iterable[str]) -> str:
-    close = difflib.get_close_matches(str(word), list(options), n=1, cutoff=0.6)
-    return f" (did you mean {close[0]!r}?)" if close else ""
-
-
-def _is_number(v: Any) -> bool:
-    return isinstance(v, (int, float, np.integer, np.floating)) and not isinstance(v, (bool, np.bool_))
-
-
-def _non_finite(value: Any, path: tuple = ()) -> list[tuple]:
-    """Paths of non-finite floats inside nested lists/dicts."""
-    if isinstance(value, (float, np.floating)) and not math.isfinite(float(value)):
-        return [path]
-    if isinstance(value, dict):
-        return [p for k, v in value.items() for p in _non_finite(v, path + (k,))]
-    if isinstance(value, (list, tuple)):
-        return [p for i, v in enumerate(value) for p in _non_finite(v, path + (i,))]
-    return []
-
-
-def _has_bool(value: Any) -> bool:
-    """A boolean inside nested lists/dicts (YAML true/false, which Python would take as 1/0)."""
-    if isinstance(value, (bool, np.bool_)):
-        return True
-    if isinstance(value, dict):
-        return any(_has_bool(v) for v in value.values())
-    if isinstance(value, (list, tuple)):
-        return any(_has_bool(v) for v in value)
-    return False
-
-
-def _out_of_range(value: Any) -> bool:
-    """A number inside nested lists/dicts outside 0 or [SIZE_MIN, PARAM_ABS_MAX] in magnitude."""
-    if _is_number(value):
-        try:
-            a = abs(float(value))
-        except OverflowError:
-            return True
-        return a != 0 and not SIZE_MIN <= a <= PARAM_ABS_MAX
-    if isinstance(value, dict):
-        return any(_out_of_range(v) for v in value.values())
-    if isinstance(value, (list, tuple)):
-        return any(_out_of_range(v) for v in value)
-    return False
-
-
 def _check_overrides(overrides: dict, allow_thrusters: bool) -> list[tuple[tuple, str, Any]]:
     """Each override key is known and its value valid on its own (applied to a copy of the
     model, then re-read with read_params' physical checks)."""
@@ -283,30 +254,6 @@ def _generic(key: str) -> str:
     return f"BODY.{field}" if head in HYDRO_BODIES else key
 
 
-def _factory(name: str) -> Callable:
-    from uvms_mj.control import base
-
-    available()  # registers the built-ins
-    factory = base._REGISTRY.get(name)
-    if factory is None:
-        factory = base._entry_points()[name].load()
-    return factory
-
-
-def _controller_signature(name: str) -> tuple[dict[str, inspect.Parameter], bool]:
-    """(named keyword parameters except trajectory/nominal, whether it takes **kwargs)."""
-    factory = _factory(name)
-    try:
-        sig = inspect.signature(factory)
-    except (TypeError, ValueError):
-        return {}, True
-    named = {
-        p.name: p for p in sig.parameters.values()
-        if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY) and p.name not in ("trajectory", "nominal", "self")
-    }
-    return named, any(p.kind == p.VAR_KEYWORD for p in sig.parameters.values())
-
-
 @lru_cache(maxsize=1)
 def _file_nominal() -> NominalModel:
     return NominalModel()
@@ -340,25 +287,6 @@ def _check_controller_params(name: str, params: dict) -> list[tuple[tuple, str, 
     return creation_errors(lambda kw: create(name, trajectory=_PROBE_PATH, nominal=_file_nominal(), **kw), params)
 
 
-def creation_errors(make: Callable[[dict], Any], params: dict) -> list[tuple[tuple, str, Any]]:
-    """The errors ``make(params)`` raises (ControllerError, ValueError, TypeError), each
-    attributed to the parameter that causes it alone (found by calling ``make`` with it alone):
-    ((key,), message, value) items, or ((), message, params) when no single parameter does."""
-
-    def attempt(kwargs: dict) -> str | None:
-        try:
-            make(kwargs)
-        except (ControllerError, ValueError, TypeError) as exc:
-            return str(exc)
-        return None
-
-    err = attempt(params)
-    if err is None:
-        return []
-    issues = [((key,), e, value) for key, value in params.items() if (e := attempt({key: value})) is not None]
-    return issues or [((), err, params)]
-
-
 def _fmt_value(v: Any) -> str:
     s = repr(v)
     return s if len(s) <= 80 else s[:77] + "..."
@@ -375,41 +303,6 @@ def _fmt_path(loc: Sequence) -> str:
 
 
 # --------------------------------------------------------------------------- schema
-
-#: Bounds of the numeric fields (physically sensible; documented in the README's testbed section).
-DURATION_MAX = 3600.0  # [s] duration, t_start
-TIMESTEP_RANGE = (1e-5, 0.1)  # [s] physics.timestep
-PERIOD_RANGE = (1e-4, 1.0)  # [s] the controller period T
-TAU_MAX = 10.0  # [s] thrusters.tau
-FORCE_MAX = 1e4  # [N] |force_range|, |dead_zone_band|
-CURRENT_MAX = 10.0  # [m/s] |plant.current|
-LENGTH_MAX = 100.0  # [m] |trajectory.target|, |trajectory.displacement|
-SPEED_MAX = 10.0  # [m/s] trajectory.cruise_speed
-ACCEL_MAX = 100.0  # [m/s^2] trajectory.accel
-POSITION_SIZE_MAX = 1.0  # [m] position noise and quantum
-ANGLE_SIZE_MAX = math.pi  # [rad] angle noise and quantum
-VELOCITY_NOISE_MAX = 10.0  # [m/s, rad/s]
-SIZE_MIN = 1e-9  # smallest non-zero noise, quantum, speed, acceleration
-SEED_MAX = 2**63 - 1
-NAME_MAX = 100  # characters (the default log name must fit in a file name)
-DESCRIPTION_MAX = 10_000  # characters
-VIDEO_FPS_MAX = 120
-VIDEO_SIZE_MAX = (3840, 2160)  # [px] width, height
-#: |value| of a numeric controller parameter or parameter override: at most this, and 0 or at least 1e-9
-PARAM_ABS_MAX = 1e6
-#: Largest timestep / tau for which the plant integrator keeps the thruster lag stable: explicit
-#: Euler |1 - x| < 1; RK4 |1 - x + x^2/2 - x^3/6 + x^4/24| < 1 (MuJoCo integrates activations
-#: explicitly with every integrator except rk4, which integrates them with the rest of the state).
-LAG_STABILITY = {"euler": 2.0, "implicit": 2.0, "implicitfast": 2.0, "rk4": 2.785}
-
-Vec2 = Annotated[list[float], Field(min_length=2, max_length=2)]
-ForceVec2 = Annotated[list[Annotated[float, Field(ge=-FORCE_MAX, le=FORCE_MAX)]], Field(min_length=2, max_length=2)]
-LengthVec2 = Annotated[list[Annotated[float, Field(ge=-LENGTH_MAX, le=LENGTH_MAX)]], Field(min_length=2, max_length=2)]
-
-
-class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False, validate_default=False)
-
 
 class Physics(_Section):
     """MuJoCo integration settings (defaults: the model file's)."""
@@ -488,35 +381,6 @@ class NominalSection(_Section):
         return v
 
 
-class Sensors(_Section):
-    """The measurement model (:class:`uvms_mj.sim.loop.SensorModel`; all off by default)."""
-
-    position_noise: float = Field(0.0, ge=0, le=POSITION_SIZE_MAX, description="std on p0x, p0y [m]")
-    angle_noise: float = Field(0.0, ge=0, le=ANGLE_SIZE_MAX,
-                               description="std on phi0, phi1, phi2 [rad] (shorthand: sets both below)")
-    attitude_noise: float | None = Field(None, ge=0, le=ANGLE_SIZE_MAX,
-                                         description="std on the base attitude phi0 [rad]; null: angle_noise")
-    joint_noise: float | None = Field(None, ge=0, le=ANGLE_SIZE_MAX,
-                                      description="std on the joint encoders phi1, phi2 [rad]; null: angle_noise")
-    position_quantum: float = Field(0.0, ge=0, le=POSITION_SIZE_MAX, description="[m], 0: none")
-    angle_quantum: float = Field(0.0, ge=0, le=ANGLE_SIZE_MAX, description="[rad], 0: none")
-    delay: int = Field(0, ge=0, le=1, description="samples of measurement delay: 0 or 1")
-    velocity_sensor: bool = False
-    velocity_noise: float = Field(0.0, ge=0, le=VELOCITY_NOISE_MAX, description="std [m/s, rad/s] (with velocity_sensor)")
-
-    @model_validator(mode="after")
-    def _tiny(self) -> "Sensors":
-        issues = []
-        for key in ("position_noise", "angle_noise", "attitude_noise", "joint_noise", "position_quantum",
-                    "angle_quantum", "velocity_noise"):
-            v = getattr(self, key)
-            if v is not None and 0 < v < SIZE_MIN:
-                issues.append(((key,), f"must be 0 (off) or at least {SIZE_MIN:g}", v))
-        if issues:
-            raise _Issues(issues)
-        return self
-
-
 class ControllerSection(_Section):
     """A registered controller and its keyword parameters."""
 
@@ -586,30 +450,6 @@ class Trajectory(_Section):
         if self.target is None and self.displacement is None:
             self.displacement = [0.3, 0.0]
         return self
-
-
-class Outputs(_Section):
-    """What a run writes."""
-
-    log: str | None = Field(None, min_length=1, max_length=4096,
-                            description="MCAP path; null: logs/<name>-<controller>.mcap")
-    video: bool = False
-    video_fps: int = Field(30, ge=1, le=VIDEO_FPS_MAX)
-    video_size: Annotated[list[int], Field(min_length=2, max_length=2)] = Field(
-        default_factory=lambda: [640, 480], description="[width, height] pixels, even, 16 to 3840 x 2160")
-    plots: bool = True
-
-    @field_validator("video_size")
-    @classmethod
-    def _size(cls, v: list[int]) -> list[int]:
-        issues = []
-        for i, (n, hi) in enumerate(zip(v, VIDEO_SIZE_MAX)):
-            if not 16 <= n <= hi or n % 2:
-                issues.append(((i,), f"must be an even number of pixels from 16 to {hi} "
-                                     "(H.264 needs even sizes)", n))
-        if issues:
-            raise _Issues(issues)
-        return v
 
 
 class Scenario(_Section):
@@ -747,7 +587,7 @@ def validate_scenario(data: Any, source: str = "<scenario>", base_dir: str | Pat
 
         if "base_dir" in data:
             raise ScenarioError(f"{source}: base_dir: unknown key 'base_dir' (set by the loader)")
-        from uvms_mj.plant.robot import BUILTIN_ROBOTS
+        from uvms_mj.plant.files import BUILTIN_ROBOTS
 
         # The scenario file's folder matters only for a robot given as a relative path.
         plant = data.get("plant") if isinstance(data.get("plant"), dict) else {}
@@ -1012,24 +852,6 @@ def nominal_params(scenario: Scenario) -> RobotParams:
 def log_path(scenario: Scenario) -> Path:
     """outputs.log, or logs/<name>-<controller>.mcap."""
     return Path(scenario.outputs.log or f"logs/{scenario.name}-{scenario.controller.name}.mcap")
-
-
-def _jsonable(v: Any) -> Any:
-    if isinstance(v, dict):
-        return {str(k): _jsonable(x) for k, x in v.items()}
-    if isinstance(v, (list, tuple)):
-        return [_jsonable(x) for x in v]
-    if isinstance(v, np.ndarray):
-        return _jsonable(v.tolist())
-    if isinstance(v, (np.bool_, bool)):
-        return bool(v)
-    if isinstance(v, np.integer):
-        return int(v)
-    if isinstance(v, (np.floating, float)):
-        return float(v)
-    if v is None or isinstance(v, (int, str)):
-        return v
-    return repr(v)
 
 
 def resolved(scenario: Scenario) -> dict:

@@ -116,7 +116,7 @@ def controller_name(controller: Controller) -> str:
 
 def measure_robot(plant, layout, sensor: SensorModel, rng: np.random.Generator, q_true: np.ndarray | None = None,
                   qd_true: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
-    """(qpos, qvel or None) as measured on a floating robot (:class:`uvms_mj.plant.robot.RobotPlant`).
+    """(qpos, qvel or None) as measured on a floating robot (a :class:`uvms_mj.plant.plant.Plant` whose vehicle is on a free joint).
 
     Noise: ``position_noise`` on the vehicle's world position (3), ``attitude_noise`` as a
     body-frame rotation vector with that std per axis composed with the true orientation
@@ -191,7 +191,9 @@ def run_closed_loop(
     noisy = bool(sensor.position_noise or att_noise or joint_noise)
     quantized = bool(sensor.position_quantum or sensor.angle_quantum)
 
-    layout = getattr(plant, "layout", None)  # a RobotPlant (any robot): its own measurement layout
+    layout = getattr(plant, "layout", None)  # a free vehicle: measured by its layout (measure_robot)
+    if layout is not None and not layout.base_free:
+        layout = None  # a planar base (the paper's): the planar measurement below
 
     def measure(k: int, q_true: np.ndarray, qd_true: np.ndarray) -> Measurement:
         nonlocal q_prev_meas
@@ -243,10 +245,7 @@ def run_closed_loop(
             break
         _command(plant, thrust, torques)
         if k == 0 and warm_start:
-            if layout is not None:
-                plant.warm_start(thrust)
-            else:
-                plant.data.act[plant._thr_act] = np.clip(thrust, plant._thr_lo, plant._thr_hi)
+            plant.warm_start(thrust)
         times.append(k * T)
         row = {**cmd.signals, "q_true": q_true, "qd_true": qd_true, "tip_true": tip_true, "q_measured": meas.q,
                "thrust_command": thrust,

@@ -1,0 +1,61 @@
+"""Where the robots' model files are: the built-in names and the models folder.
+
+A robot is a built-in name (:data:`BUILTIN_ROBOTS`) or the path of an MJCF file; the built-in
+files live in the repository's ``models/`` folder (or the copy packaged in the wheel).
+"""
+
+from __future__ import annotations
+
+import difflib
+from pathlib import Path
+
+from uvms_mj.plant.params import ParameterError
+
+__all__ = ["BUILTIN_ROBOTS", "default_model_path", "models_dir", "robot_path"]
+
+_PKG = Path(__file__).resolve().parents[1]  # the uvms_mj package folder
+
+
+def models_dir() -> Path:
+    """Folder holding uvms.xml and scene.xml (the repository's ``models/``, or the packaged copy)."""
+    for cand in (_PKG.parents[1] / "models", _PKG / "models"):
+        if (cand / "uvms.xml").is_file():
+            return cand
+    raise FileNotFoundError("cannot find the uvms_mj models folder (models/uvms.xml)")
+
+
+def default_model_path() -> Path:
+    """The default plant model: ``models/scene.xml`` (robot + floor, lights, cameras)."""
+    return models_dir() / "scene.xml"
+
+
+#: Built-in robots: name -> file in ``models/`` ("paper": the paper's planar robot in its scene;
+#: every robot runs on :class:`uvms_mj.plant.plant.Plant`).
+BUILTIN_ROBOTS: dict[str, str] = {
+    "paper": "scene.xml",
+    "bluerov2_heavy": "bluerov2_heavy.xml",
+    "bluerov2_alpha": "bluerov2_alpha.xml",
+    "hinsdale2023": "hinsdale2023.xml",
+}
+
+
+def robot_path(robot: str | Path, base_dir: str | Path | None = None) -> Path:
+    """The MJCF file of a robot: a built-in name (:data:`BUILTIN_ROBOTS`) or a path (relative
+    paths are taken relative to ``base_dir``, e.g. the scenario file's folder, then to the
+    current folder).
+
+    Raises:
+        ParameterError: not a built-in name and no such file (the message lists the built-ins).
+    """
+    key = str(robot)
+    if key in BUILTIN_ROBOTS:
+        return models_dir() / BUILTIN_ROBOTS[key]
+    p = Path(key).expanduser()
+    cands = [p] if p.is_absolute() else ([Path(base_dir) / p] if base_dir is not None else []) + [p]
+    for c in cands:
+        if c.is_file():
+            return c.resolve()
+    close = difflib.get_close_matches(key, list(BUILTIN_ROBOTS), n=1, cutoff=0.6)
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    raise ParameterError(f"robot = {key!r}: neither a built-in robot{hint} ({', '.join(BUILTIN_ROBOTS)}) "
+                         "nor an existing MJCF file")

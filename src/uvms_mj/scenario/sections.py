@@ -1,0 +1,266 @@
+"""Scenario sections that apply to every robot: the initial state, the water current, thruster
+failures, the vehicle's setpoint and trajectory.
+
+Each is validated here on its own (types, bounds, one of two alternatives); names (joints,
+thrusters) are checked against the robot's model by the scenario that uses the section.
+Angles are in the section's ``angle_unit`` (deg by default); positions world [m].
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Annotated, Any, Literal
+
+import numpy as np
+from pydantic import Field, model_validator
+
+from uvms_mj.physics.current import Current
+from uvms_mj.plant.layout import InitialState
+from uvms_mj.plant.plant import ThrusterFailure
+from uvms_mj.rotations import quat_from_rpy
+from uvms_mj.scenario.base import _NO_VALUE as _NO
+from uvms_mj.scenario.base import CURRENT_MAX, DURATION_MAX, SEED_MAX, _Issues, _Section
+
+__all__ = ["CurrentSection", "Failure", "Initial", "Orientation", "Setpoint", "Vehicle"]
+
+#: Bounds (as the paper scenario's).
+POSITION_MAX = 1000.0  # [m] |initial.position|, |vehicle.setpoint.position|
+VELOCITY_MAX = 10.0  # [m/s], [rad/s] initial velocities
+
+Vec3 = Annotated[list[Annotated[float, Field(ge=-POSITION_MAX, le=POSITION_MAX)]], Field(min_length=3, max_length=3)]
+Vel3 = Annotated[list[Annotated[float, Field(ge=-VELOCITY_MAX, le=VELOCITY_MAX)]], Field(min_length=3, max_length=3)]
+Cur3 = Annotated[list[Annotated[float, Field(ge=-CURRENT_MAX, le=CURRENT_MAX)]], Field(min_length=2, max_length=3)]
+
+
+class Orientation(_Section):
+    """The vehicle's initial orientation: a quaternion or roll/pitch/yaw (not both)."""
+
+    quat: Annotated[list[float], Field(min_length=4, max_length=4)] | None = Field(
+        None, description="[w, x, y, z], normalised")
+    rpy: Annotated[list[Annotated[float, Field(ge=-720, le=720)]], Field(min_length=3, max_length=3)] | None = Field(
+        None, description="roll, pitch, yaw in initial.angle_unit (z-y-x convention)")
+
+    @model_validator(mode="after")
+    def _one(self) -> "Orientation":
+        if self.quat is not None and self.rpy is not None:
+            raise _Issues([((), "give either quat or rpy, not both", {"quat": self.quat, "rpy": self.rpy})])
+        if self.quat is not None and float(np.linalg.norm(self.quat)) < 1e-9:
+            raise _Issues([(("quat",), "must not be zero", self.quat)])
+        return self
+
+
+class Initial(_Section):
+    """The initial state (every field optional)."""
+
+    keyframe: str | None = Field(None, description="a model keyframe to start from")
+    position: Vec3 | None = Field(None, description="vehicle origin, world [m]")
+    orientation: Orientation | None = None
+    joints: dict[str, float] = Field(default_factory=dict, description="joint name -> angle [angle_unit]")
+    angle_unit: Literal["deg", "rad"] = Field("deg", description="unit of rpy, joints and joint_velocities")
+    linear_velocity: Vel3 | None = Field(None, description="world [m/s]")
+    angular_velocity: Vel3 | None = Field(None, description="body frame [rad/s]")
+    joint_velocities: dict[str, float] = Field(default_factory=dict, description="joint name -> [angle_unit/s]")
+
+    def state(self) -> InitialState:
+        """As :class:`uvms_mj.plant.layout.InitialState` (radians)."""
+        k = math.pi / 180.0 if self.angle_unit == "deg" else 1.0
+        quat = None
+        if self.orientation is not None:
+            if self.orientation.quat is not None:
+                quat = tuple(self.orientation.quat)
+            elif self.orientation.rpy is not None:
+                quat = tuple(quat_from_rpy(*(k * v for v in self.orientation.rpy)))
+        return InitialState(
+            position=tuple(self.position) if self.position is not None else None, quat=quat,
+            joints={n: k * v for n, v in self.joints.items()},
+            linear_velocity=tuple(self.linear_velocity) if self.linear_velocity is not None else None,
+            angular_velocity=tuple(self.angular_velocity) if self.angular_velocity is not None else None,
+            joint_velocities={n: k * v for n, v in self.joint_velocities.items()},
+            keyframe=self.keyframe)
+
+
+
+
+class GaussMarkov(_Section):
+    """A first-order Gauss-Markov current (:class:`uvms_mj.physics.current.Current`)."""
+
+    mean: Cur3 | None = Field(None, description="mu, world [m/s]; null: the plugin's default (0)")
+    sigma: Cur3 | None = Field(None, description="stationary std per axis [m/s]; null: the plugin's default")
+    tau: Annotated[list[Annotated[float, Field(gt=0, le=1e6)]], Field(min_length=2, max_length=3)] | None = Field(
+        None, description="correlation time per axis [s]; null: the plugin's default")
+    min: Cur3 | None = Field(None, description="clipping bound per axis [m/s]")
+    max: Cur3 | None = Field(None, description="clipping bound per axis [m/s]")
+    seed: int | None = Field(None, ge=0, le=SEED_MAX, description="random stream; null: the scenario's seed")
+
+
+class Knot(_Section):
+    z: float = Field(ge=-11000.0, le=1000.0, description="depth coordinate, world z [m] (up)")
+    velocity: Cur3 = Field(description="current at z, world [m/s]")
+
+
+class CurrentSection(_Section):
+    """The water current: one of the water plugin's models, set from the scenario."""
+
+    model: Literal["constant", "gauss_markov", "profile"] = "constant"
+    velocity: Cur3 = Field(default_factory=lambda: [0.0, 0.0, 0.0],
+                           description="world [m/s]: the constant current, or the Gauss-Markov start")
+    gauss_markov: GaussMarkov | None = Field(None, description="with model: gauss_markov")
+    profile: list[Knot] | None = Field(None, description="with model: profile (z strictly increasing)")
+
+    @model_validator(mode="after")
+    def _consistent(self) -> "CurrentSection":
+        if self.gauss_markov is not None and self.model != "gauss_markov":
+            raise _Issues([(("gauss_markov",), f"applies to model: gauss_markov (model is {self.model!r})", _NO)])
+        if self.profile is not None and self.model != "profile":
+            raise _Issues([(("profile",), f"applies to model: profile (model is {self.model!r})", _NO)])
+        if self.model == "profile":
+            if not self.profile:
+                raise _Issues([(("profile",), "model: profile needs knots [{z, velocity}, ...]", _NO)])
+            for i, (a, b) in enumerate(zip(self.profile, self.profile[1:])):
+                if not b.z > a.z:
+                    raise _Issues([(("profile", i + 1, "z"), f"must be greater than the previous knot's {a.z:g} m",
+                                    b.z)])
+        gm = self.gauss_markov
+        if gm is not None and gm.min is not None and gm.max is not None:
+            if any(a > b for a, b in zip(gm.min, gm.max)):
+                raise _Issues([(("gauss_markov",), "min must not exceed max in any axis", {"min": gm.min, "max": gm.max})])
+        return self
+
+    def current(self, seed: int) -> Current:
+        """As :class:`uvms_mj.physics.current.Current` (``seed``: the scenario's, unless given)."""
+        gm = self.gauss_markov or GaussMarkov()
+        return Current(model=self.model, velocity=tuple(self.velocity), mean=gm.mean, sigma=gm.sigma, tau=gm.tau,
+                       vmin=gm.min, vmax=gm.max, seed=int(gm.seed if gm.seed is not None else seed) % 2**64,
+                       profile=[(k.z, *(list(k.velocity) + [0.0] * (3 - len(k.velocity)))) for k in self.profile or []])
+
+
+class Failure(_Section):
+    """A thruster failing during the run: zero force from time t (the controller is not told)."""
+
+    thruster: str = Field(min_length=1, description="the thruster actuator's name")
+    t: float = Field(ge=0, le=DURATION_MAX, description="failure time [s]")
+
+    def failure(self) -> ThrusterFailure:
+        return ThrusterFailure(thruster=self.thruster, t=float(self.t))
+
+
+class Setpoint(_Section):
+    """A pose the vehicle is to hold; what is not given stays the initial state's."""
+
+    position: Vec3 | None = Field(None, description="vehicle origin, world [m] (planar robots: along the base's slides)")
+    orientation: Orientation | None = None
+    angle_unit: Literal["deg", "rad"] = Field("deg", description="unit of orientation.rpy")
+
+    def pose(self, layout, q0: np.ndarray) -> list[float]:
+        """The setpoint as the base's qpos (free: x, y, z, qw, qx, qy, qz; planar: one per base
+        joint), missing parts from ``q0`` (the initial qpos)."""
+        import mujoco
+
+        k = math.pi / 180.0 if self.angle_unit == "deg" else 1.0
+        quat = None
+        if self.orientation is not None:
+            quat = (tuple(self.orientation.quat) if self.orientation.quat is not None
+                    else tuple(quat_from_rpy(*(k * v for v in self.orientation.rpy))))
+        a = layout.base_qadr
+        out = np.array(q0[a:a + layout.base_nq], dtype=float)
+        if layout.base_free:
+            if self.position is not None:
+                out[:3] = self.position
+            if quat is not None:
+                out[3:] = np.asarray(quat) / np.linalg.norm(quat)
+            return out.tolist()
+        return _planar_pose(layout, out, self.position, quat, mujoco)
+
+
+def _planar_pose(layout, out, position, quat, mujoco) -> list[float]:
+    """A planar base's joint coordinates for a world position / orientation (the plane's axes;
+    the hinge about world z, the paper's)."""
+    axes = list(layout.plane_axes)
+    nslide = len(axes) if layout.base_hinge >= 0 else len(out)
+    if position is not None:
+        for i, ax in enumerate(axes[:nslide]):
+            out[i] = position[ax]
+    if quat is not None and layout.base_hinge >= 0:
+        rv = np.zeros(3)
+        mujoco.mju_quat2Vel(rv, np.asarray(quat, dtype=float) / np.linalg.norm(quat), 1.0)
+        out[nslide] = float(rv[2])
+    return out.tolist()
+
+
+class Vehicle(_Section):
+    """What the vehicle is to do: hold a setpoint, or follow a trajectory of its origin."""
+
+    setpoint: Setpoint | None = Field(None, description="the pose to hold; null: the first measurement's")
+    trajectory: dict[str, Any] | None = Field(
+        None, description="the vehicle origin's path (world; uvms_mj.control.trajectories kinds), started at "
+        "the setpoint (or the initial position); for controllers that take base_trajectory")
+
+    @model_validator(mode="after")
+    def _trajectory(self) -> "Vehicle":
+        if self.trajectory is not None:
+            from uvms_mj.control.trajectories import make_trajectory
+
+            try:
+                make_trajectory(self.trajectory)
+            except ValueError as exc:
+                msg = str(exc)
+                raise _Issues([(("trajectory",), msg[len("trajectory."):] if msg.startswith("trajectory.") else msg,
+                                _NO)]) from None
+        return self
+
+
+
+def _takers(param: str) -> list[str]:
+    from uvms_mj.control import available
+    from uvms_mj.scenario.base import _controller_signature
+
+    out = []
+    for n in available():
+        try:
+            if param in _controller_signature(n)[0]:
+                out.append(n)
+        except Exception:  # noqa: BLE001 - a broken plug-in is not offered
+            continue
+    return out
+
+
+def vehicle_issues(vehicle: Vehicle, controller: str, params: dict | None = None) -> list:
+    """Problems of the vehicle section with the scenario's controller: a setpoint needs a
+    controller taking ``base_reference``, a trajectory one taking ``base_trajectory``; neither
+    may be given twice (section and controller.params)."""
+    from uvms_mj.scenario.base import _controller_signature
+
+    try:
+        named, _ = _controller_signature(controller)
+    except Exception:  # noqa: BLE001 - an unknown controller is reported elsewhere
+        return []
+    issues = []
+    for field, param, value in (("setpoint", "base_reference", vehicle.setpoint),
+                                ("trajectory", "base_trajectory", vehicle.trajectory)):
+        if value is None:
+            continue
+        if param not in named:
+            issues.append((("vehicle", field), f"controller {controller!r} takes no vehicle {field} ({param}); "
+                           f"controllers that do: {', '.join(_takers(param)) or 'none'}", _NO))
+        elif params and params.get(param) is not None:
+            issues.append((("vehicle", field), f"give either vehicle.{field} or controller.params.{param}, not both",
+                           _NO))
+    return issues
+
+
+def vehicle_params(vehicle: Vehicle, plant, base_dir: str | None = None) -> dict:
+    """The controller parameters of the vehicle section on a built plant: ``base_reference``
+    (the setpoint as the base's qpos, missing parts from the initial state) and
+    ``base_trajectory`` (the path started at the setpoint's position, else the initial one)."""
+    out: dict = {}
+    q0 = plant.q
+    if vehicle.setpoint is not None:
+        out["base_reference"] = vehicle.setpoint.pose(plant.layout, q0)
+    if vehicle.trajectory is not None:
+        from uvms_mj.control.trajectories import make_trajectory, starting_at
+
+        lay = plant.layout
+        start = (np.asarray(vehicle.setpoint.position, dtype=float) if vehicle.setpoint is not None
+                 and vehicle.setpoint.position is not None else np.asarray(q0[lay.base_qadr:lay.base_qadr + 3]))
+        out["base_trajectory"] = starting_at(make_trajectory(vehicle.trajectory, base_dir=base_dir), start)
+    return out
