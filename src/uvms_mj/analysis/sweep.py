@@ -1085,7 +1085,7 @@ def execute_run(task: dict) -> dict:
         sc = validate_scenario(task["scenario"], f"run {task['run_id']}")
         log = task.get("log")
         if log:
-            from uvms_mj.io.recorder import McapRecorder
+            from uvms_mj.io.writer import McapRecorder
             from uvms_mj.scenario.schema import build, resolved
 
             plant, _ = build(sc)
@@ -1391,7 +1391,7 @@ def run_sweep(
     SIGTERM inside recorder.handle_sigterm) stops the sweep; finished runs are kept (table
     written) and the exception propagates.
     """
-    from uvms_mj.io.recorder import _critical
+    from uvms_mj.io.interrupts import _critical
 
     check_engine(engine)
     workers = int(workers or _cpu_count())
