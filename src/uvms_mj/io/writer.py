@@ -55,7 +55,7 @@ class McapRecorder:
         compression: "zstd", "lz4" or "none".
         model: any floating robot's compiled model (a :class:`~uvms_mj.plant.robot.RobotPlant`'s
             ``model``; ``params`` must then be None): ``/tf``, ``/scene``, ``/joint_states``,
-            ``/thrusters`` and ``/scene/paths`` come from it by name (module docstring, robot
+            ``/thrusters`` and ``/scene/paths`` come from it by name (:mod:`uvms_mj.io.recorder`, robot
             logs). The tip site is ``metadata["robot"]["layout"]["tip_site"]`` when given, else
             :meth:`~uvms_mj.plant.robot.Layout.of`'s default.
 
