@@ -590,19 +590,19 @@ def test_git_commit_outside_a_checkout(monkeypatch):
     import sys as _sys
     import types
 
-    from uvms_mj.io import recorder
+    from uvms_mj.io import provenance
 
-    monkeypatch.setattr(recorder, "_git_checkout_info", lambda: {})
+    monkeypatch.setattr(provenance, "_git_checkout_info", lambda: {})
     monkeypatch.setitem(_sys.modules, "uvms_mj._build_info", None)  # no build info: import fails
-    assert recorder._git_info() == {"git_commit": "unknown"}
+    assert provenance._git_info() == {"git_commit": "unknown"}
     built = types.ModuleType("uvms_mj._build_info")
     built.GIT_COMMIT, built.GIT_DIRTY = "a" * 40, False
     monkeypatch.setitem(_sys.modules, "uvms_mj._build_info", built)
     import uvms_mj
 
     monkeypatch.setattr(uvms_mj, "_build_info", built, raising=False)
-    assert recorder._git_info() == {"git_commit": "a" * 40, "git_dirty": False}
-    assert recorder.provenance()["git_commit"] == "a" * 40
+    assert provenance._git_info() == {"git_commit": "a" * 40, "git_dirty": False}
+    assert provenance.provenance()["git_commit"] == "a" * 40
 
 
 def test_legacy_joint_states_log_reads_back(recorded, tmp_path):

@@ -157,7 +157,7 @@ def test_sampling_is_reproducible_and_paired():
     from uvms_mj.scenario.schema import load_scenario, resolved
 
     sc = load_scenario(PAPER, s0.sets)
-    assert sw._run_key(resolved(sc)) == s0.key
+    assert sw.plan._run_key(resolved(sc)) == s0.key
 
 
 def test_scale_is_relative_to_the_scenario_value():
@@ -255,14 +255,14 @@ def test_failures_are_recorded_and_never_stop_the_sweep(tmp_path):
 
 
 def test_a_run_that_raises_is_recorded(tmp_path, monkeypatch):
-    real = sw.run_scenario
+    real = sw.engines._run_scenario
 
     def flaky(scenario, sink=None):
         if scenario.thrusters.tau > 0.025:
             raise RuntimeError("boom in the plant")
         return real(scenario, sink=sink)
 
-    monkeypatch.setattr(sw, "run_scenario", flaky)
+    monkeypatch.setattr(sw.engines, "_run_scenario", flaky)
     plan = plan_sweep(PAPER, ["thrusters.tau=[0.02, 0.03, 0.021]"], controllers="rac", sets=["duration=0.5"])
     out = run_sweep(plan, tmp_path / "e", engine="serial")
     assert [r["status"] for r in out.rows] == ["ok", "error", "ok"]

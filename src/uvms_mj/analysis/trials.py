@@ -72,6 +72,8 @@ __all__ = [
     "roll_pitch_yaw",
     "uniform_grid",
 ]
+# One module of about 600 lines (a sixth of them the format's description above): the data classes,
+# the row checks and the loader describe one file format together; split, each part would need the others.
 
 #: Model joints and the recorded axis each comes from (the order of the model's offsets).
 JOINT_NAMES: tuple[str, ...] = ("alpha_base", "alpha_shoulder", "alpha_elbow", "alpha_wrist")

@@ -15,6 +15,8 @@ from pathlib import Path
 
 import click
 
+from uvms_mj.cli.common import _check_dir, _io_error, _json_dest, _write_json
+
 _JSON_HELP = "Also write the results as JSON: '-' for stdout (the table then goes to stderr), or a file path."
 
 
@@ -135,8 +137,6 @@ def _static(m, ts, echo) -> dict | None:
 
 
 def _write(json_out, data) -> None:
-    from uvms_mj.cli.main import _io_error, _write_json
-
     try:
         _write_json(data, json_out)
     except OSError as exc:
@@ -169,7 +169,6 @@ def _cfg(dt: float | None, neutral: bool):
 def sim2real(data_dir, trial_names, model, overrides, json_out, plots_dir, dt, as_is, jobs, plot_nominal) -> None:
     """Replay the pool trials of DATA_DIR in the model (arm motion imposed, thrusters off, measured
     initial attitude and velocity) and compare simulated roll and pitch with the IMU."""
-    from uvms_mj.cli.main import _json_dest
     from uvms_mj.analysis.identify import run_trials
     from uvms_mj.analysis.sim2real import MAX_TRACKING_ERROR_DEG, plot_trial
 
@@ -177,8 +176,6 @@ def sim2real(data_dir, trial_names, model, overrides, json_out, plots_dir, dt, a
     cfg = _cfg(dt, not as_is)
     plots = None
     if plots_dir is not None:
-        from uvms_mj.cli.main import _check_dir
-
         plots = _check_dir(plots_dir)
     m, over, ts = _load(data_dir, model, overrides, _names(trial_names), cfg.neutral, echo)
     static = _static(m, ts, echo)
@@ -205,8 +202,6 @@ def sim2real(data_dir, trial_names, model, overrides, json_out, plots_dir, dt, a
                 plot_trial(ts[n], sim, sc, plots / f"sim2real_{n}.png", label="with overrides" if over else "simulated",
                            others=others)
         except OSError as exc:
-            from uvms_mj.cli.main import _io_error
-
             _io_error(plots, exc)
         echo(f"plots: {plots}")
     if json_out:
@@ -215,7 +210,7 @@ def sim2real(data_dir, trial_names, model, overrides, json_out, plots_dir, dt, a
                           **_issues_json(ts)})
 
 
-@click.command()
+@click.command("identify")
 @click.argument("data_dir", type=click.Path())
 @click.option("--fit", "fit_names", default=None, metavar="A,B,...", help="Trials to fit on.")
 @click.option("--score", "score_names", default=None, metavar="C,D,...",
@@ -234,11 +229,10 @@ def sim2real(data_dir, trial_names, model, overrides, json_out, plots_dir, dt, a
 @click.option("--max-nfev", type=int, default=30, show_default=True, help="Most optimiser evaluations per fit.")
 @click.option("--jobs", type=int, default=None, help="Worker processes (default: min(2, CPUs)).")
 @click.option("--quiet", is_flag=True, default=False, help="No progress lines.")
-def identify(data_dir, fit_names, score_names, cv, trial_names, param_names, model, overrides, out, json_out, fit_dt,
+def identify_cmd(data_dir, fit_names, score_names, cv, trial_names, param_names, model, overrides, out, json_out, fit_dt,
              max_nfev, jobs, quiet) -> None:
     """Fit uncertain model parameters to the roll and pitch of chosen trials (bounded least squares)
     and report the error on other trials; write the identified values as an override file."""
-    from uvms_mj.cli.main import _json_dest
     from uvms_mj.analysis.identify import (
         DEFAULT_FIT_DT,
         DEFAULT_PARAMS,
@@ -307,8 +301,6 @@ def identify(data_dir, fit_names, score_names, cv, trial_names, param_names, mod
         try:
             write_overrides(dest, r.overrides, header)
         except OSError as exc:
-            from uvms_mj.cli.main import _io_error
-
             _io_error(dest, exc)
         written.append(str(dest))
         echo(f"overrides: {dest}")

@@ -62,7 +62,7 @@ def _columns(name: str, arr: np.ndarray) -> list[tuple[str, np.ndarray]]:
 
 def _groups(log) -> dict[str, list[str]]:
     """Signal names per table name, in the log's order."""
-    from uvms_mj.io.recorder import STATE_SIGNALS
+    from uvms_mj.io.schemas import STATE_SIGNALS
 
     names = list(log.signals)
     state = [n for n in names if n in STATE_SIGNALS]

@@ -1,0 +1,92 @@
+"""Paper-style figures of a run (matplotlib, Agg, no display needed).
+
+* :func:`plot_run` writes ``{stem}_tracking.png`` (errors and desired vs actual, as the paper's
+  Figs. 5 and 6: base position error x/y, base attitude error, end-tip position error, plus the
+  tip and base positions and the path in the plane) and ``{stem}_actuation.png`` (thrust command
+  and actual force with the limits, joint torques, the observer estimate f_E_hat, det B with the
+  threshold Js and the singular-handling phase).
+* :func:`plot_comparison` overlays the errors of the same scenario run with several controllers.
+* Robot logs (any floating robot, ``meta["robot"]``) get their own figures with the model's
+  names (:func:`plot_run`; errors by :func:`robot_errors`: world-frame position, body-frame
+  attitude rotation vector).
+
+Errors are desired minus true: ``p_desired`` against ``q_true`` (base) and ``tip_true`` (tip).
+A log is anything with ``.t``, ``.signals`` (name -> array) and ``.meta``: a ``RunResult`` or a
+log read back from disk. Signals a controller does not produce (the pd baseline has no f_E_hat
+or singular_phase) are skipped with a note in their panel.
+
+Figures are built on :class:`matplotlib.figure.Figure` directly (no pyplot), so importing this
+module never changes the user's matplotlib backend.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Mapping
+
+import numpy as np
+
+# common: log access and drawing helpers; paper: the planar paper robot's figures; robot: any
+# floating robot's (logs with meta["robot"]). This module picks one for each log.
+from uvms_mj.analysis.plots.paper import _plot_paper_comparison, _plot_paper_run, tracking_errors
+from uvms_mj.analysis.plots.robot import _plot_robot_comparison, _plot_robot_run, _robot, attitude_error, robot_errors
+
+__all__ = ["attitude_error", "plot_run", "plot_comparison", "robot_errors", "tracking_errors"]
+
+
+def plot_run(log, out_dir: str | Path, stem: str = "run") -> list[Path]:
+    """Write ``{stem}_tracking.png`` and ``{stem}_actuation.png`` into ``out_dir``.
+
+    Args:
+        log: a run (``RunResult``) or a log read from disk (``.t``, ``.signals``, ``.meta``).
+        out_dir: folder (created).
+        stem: file name prefix.
+
+    Returns:
+        The paths written.
+
+    A robot log (``meta["robot"]``, any floating robot) gets the same two files, labelled with
+    the model's own names: ``_tracking``: base position x, y, z [m] and attitude roll, pitch,
+    yaw [deg] (desired vs actual when ``base_desired`` is logged), base position error [mm] and
+    attitude error [deg], joint angles [rad] vs ``joints_desired``, the end-tip error [mm] (or
+    position); ``_actuation``: thruster forces and commands [N], joint torques [N m], the
+    controller's body-frame wrench. Panels whose signals are not logged say so.
+    """
+    t = np.asarray(log.t, dtype=float)
+    if t.ndim != 1 or len(t) < 2:
+        raise ValueError(f"the log has {len(t)} samples: at least 2 are needed to plot")
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    robot = _robot(log)
+    if robot is not None:
+        return _plot_robot_run(log, robot, out, stem)
+    return _plot_paper_run(log, out, stem)
+
+
+def plot_comparison(logs: Mapping[str, Any], out_path: str | Path) -> Path:
+    """One figure overlaying, per controller, the base position error norm [mm], the base
+    attitude error [mrad] and the end-tip error norm [mm] (desired - true); RMS and max in the
+    legend. A panel whose curves differ by more than 30x in size switches to a log scale (and the
+    attitude error to its magnitude) so that every controller stays readable.
+
+    Args:
+        logs: label (e.g. controller name) -> log of the same scenario.
+        out_path: the PNG to write (folders are created).
+
+    Robot logs (all of them; :func:`plot_run`): the base position error norm [mm], the attitude
+    error angle [deg] and, when ``tip_desired`` is logged, the end-tip error norm [mm]
+    (:func:`robot_errors`).
+    """
+    if not logs:
+        raise ValueError("plot_comparison needs at least one log")
+    out_path = Path(out_path)
+    robots = {label: _robot(log) for label, log in logs.items()}
+    if any(r is not None for r in robots.values()):
+        paper = [label for label, r in robots.items() if r is None]
+        if paper:
+            raise ValueError(f"plot_comparison: {', '.join(map(repr, paper))} are paper (planar) logs and the "
+                             "others robot logs: comparing the two kinds is not supported")
+        out_path.parent.mkdir(parents=True, exist_ok=True)
+        return _plot_robot_comparison(logs, out_path)
+    out_path.parent.mkdir(parents=True, exist_ok=True)
+    return _plot_paper_comparison(logs, out_path)

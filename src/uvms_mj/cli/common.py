@@ -1,0 +1,206 @@
+"""What the ``uvms-mj`` commands share: exit codes, output-path checks and I/O errors, JSON and
+metrics tables, the SCENARIO argument (a file or a packaged scenario), reading logs, progress bars."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+import numpy as np
+
+EXIT_DIVERGED = 3
+EXIT_RENDER = 4
+EXIT_IO = 5
+EXIT_INTERRUPTED = 130
+
+METRIC_LABELS = {
+    "base_pos_rms_mm": "base position RMS [mm]",
+    "base_pos_max_mm": "base position max [mm]",
+    "base_att_rms_mrad": "base attitude RMS [mrad]",
+    "base_att_max_mrad": "base attitude max [mrad]",
+    "tip_rms_mm": "end tip RMS [mm]",
+    "tip_max_mm": "end tip max [mm]",
+    "thrust_rms_N": "thrust RMS [N]",
+    "torque_rms_Nm": "joint torque RMS [N m]",
+    "saturated_s": "thrusters saturated [s]",
+    "joint_rms_mrad": "arm joints RMS [mrad]",
+}
+#: Rows shown only when some run has a value (floating-robot metrics).
+_OPTIONAL_ROWS = ("joint_rms_mrad",)
+
+
+def metrics_table(results: dict[str, dict[str, float]], status: dict[str, str] | None = None) -> str:
+    """Side-by-side metrics; with two columns, the ratio second / first; with ``status``
+    (controller -> "ok", "diverged"...), a status row first."""
+    names = list(results)
+    ratio = len(names) == 2
+    lines = [f"{'metric':<28}" + "".join(f"{n:>12}" for n in names) + (f"{'ratio':>9}" if ratio else "")]
+    if status is not None:
+        lines.append(f"{'status':<28}" + "".join(f"{status.get(n, '?'):>12}" for n in names))
+    for key, label in METRIC_LABELS.items():
+        vals = [results[n].get(key, float("nan")) for n in names]
+        if key in _OPTIONAL_ROWS and all(v != v for v in vals):
+            continue
+        line = f"{label:<28}" + "".join(f"{v:>12.4g}" for v in vals)
+        if ratio:
+            line += f"{(vals[1] / vals[0]) if vals[0] else float('nan'):>9.2f}"
+        lines.append(line)
+    return "\n".join(lines)
+
+
+def _interrupted() -> None:
+    click.echo("interrupted", err=True)
+    sys.exit(EXIT_INTERRUPTED)
+
+
+def _io_error(path, exc: OSError) -> None:
+    """An output that could not be written: one line, exit EXIT_IO."""
+    click.echo(f"error: cannot write {path}: {exc.strerror or exc}", err=True)
+    sys.exit(EXIT_IO)
+
+
+def _check_out(path, protect: tuple = (), kind: str = "log", magic: bytes | None = b"\x89MCAP") -> Path:
+    from uvms_mj.io.recorder import OutputPathError, check_output_path
+
+    try:
+        return check_output_path(path, protect=protect, kind=kind, magic=magic)
+    except OutputPathError as exc:
+        raise click.UsageError(str(exc)) from None
+
+
+def _check_dir(path) -> Path:
+    from uvms_mj.io.recorder import OutputPathError, check_output_dir
+
+    try:
+        return check_output_dir(path)
+    except OutputPathError as exc:
+        raise click.UsageError(str(exc)) from None
+
+
+def _warn(scenario) -> None:
+    from uvms_mj.scenario.schema import scenario_warnings
+
+    for w in scenario_warnings(scenario):
+        click.echo(f"warning: {w}", err=True)
+
+
+def _json_metrics(runs: dict[str, dict], scenario: str) -> dict:
+    """The machine-readable result of run/compare (see ``--json``)."""
+    out: dict = {"scenario": scenario, "runs": runs}
+    names = list(runs)
+    if len(names) == 2:
+        a, b = (runs[n]["metrics"] for n in names)
+        out["ratio"] = {"of": names[1], "to": names[0],
+                        "metrics": {k: (b[k] / a[k] if a.get(k) else None) for k in METRIC_LABELS if k in a and k in b}}
+    return out
+
+
+def _write_json(data: dict, dest: str) -> None:
+    """JSON to stdout ("-") or to a file; NaN and infinities become null."""
+    import json
+    import math
+
+    def clean(x):
+        if isinstance(x, float) and not math.isfinite(x):
+            return None
+        if isinstance(x, dict):
+            return {k: clean(v) for k, v in x.items()}
+        if isinstance(x, (list, tuple)):
+            return [clean(v) for v in x]
+        if isinstance(x, np.generic):
+            return clean(x.item())
+        return x
+
+    text = json.dumps(clean(data), indent=2, allow_nan=False)
+    if dest == "-":
+        click.echo(text)
+    else:
+        Path(dest).parent.mkdir(parents=True, exist_ok=True)
+        Path(dest).write_text(text + "\n")
+
+
+def scenarios_dir() -> Path:
+    """The scenario files shipped with the package (the repository's ``scenarios/`` in a checkout)."""
+    pkg = Path(__file__).resolve().parents[1]  # the uvms_mj package folder
+    for cand in (pkg.parents[1] / "scenarios", pkg / "scenarios"):
+        if cand.is_dir() and any(cand.glob("*.yaml")):
+            return cand
+    return pkg / "scenarios"
+
+
+def packaged_scenarios() -> list[str]:
+    """Names of the packaged scenarios (``uvms-mj run NAME``)."""
+    return sorted(p.stem for p in scenarios_dir().glob("*.yaml"))
+
+
+class ScenarioPath(click.ParamType):
+    """A scenario file, or the name of a packaged scenario when no such file exists."""
+
+    name = "SCENARIO"
+
+    def convert(self, value, param, ctx):
+        p = Path(value)
+        if p.is_file():
+            return str(p)
+        if p.exists():
+            self.fail(f"{value!r} is not a file", param, ctx)
+        if p.name == str(value):  # a bare name: a packaged scenario
+            cand = scenarios_dir() / (value if value.endswith((".yaml", ".yml")) else f"{value}.yaml")
+            if cand.is_file():
+                return str(cand)
+        self.fail(f"{value!r}: no such file, nor a packaged scenario ({', '.join(packaged_scenarios())})",
+                  param, ctx)
+
+
+SCENARIO = ScenarioPath()
+
+
+def _json_dest(human_to_stderr: bool):
+    """click.echo for the human-readable lines: on stderr while --json - has stdout."""
+    return (lambda *a, **k: click.echo(*a, err=True, **k)) if human_to_stderr else click.echo
+
+
+_JSON_HELP = ("Also write the metrics (and status, reason, log of each run) as JSON: '-' for stdout (the "
+              "human-readable lines then go to stderr), or a file path.")
+
+
+def _load(path: str, sets: tuple[str, ...]):
+    from uvms_mj.scenario.schema import ScenarioError, load_scenario
+
+    try:
+        return load_scenario(path, sets)
+    except ScenarioError as exc:
+        raise click.UsageError(str(exc)) from None
+
+
+def _read(path) -> object:
+    """read_log with bad files turned into a usage error (exit 2), never a traceback."""
+    from uvms_mj.io.recorder import read_log
+
+    try:
+        return read_log(path)
+    except (MemoryError, RecursionError) as exc:
+        raise click.UsageError(f"{path}: not a readable uvms-mj MCAP log ({type(exc).__name__})") from None
+    except Exception as exc:  # noqa: BLE001 - McapError, struct, zstd, JSON... any malformed file
+        raise click.UsageError(f"{path}: not a readable uvms-mj MCAP log ({type(exc).__name__}: "
+                               f"{str(exc)[:200]})") from None
+
+
+class _progress:
+    """A tqdm bar (shown on terminals only) as a context manager yielding a (k, n) callback."""
+
+    def __init__(self, desc: str, unit: str) -> None:
+        from tqdm import tqdm
+
+        self.bar = tqdm(desc=desc, unit=unit, leave=False, disable=None)
+
+    def __enter__(self):
+        def tick(k: int, n: int) -> None:
+            self.bar.total = n
+            self.bar.update(1)
+
+        return tick
+
+    def __exit__(self, *exc) -> None:
+        self.bar.close()

@@ -1,0 +1,223 @@
+"""``uvms-mj run``, ``compare`` and ``validate``: scenario files run into MCAP logs, metrics
+tables, plots and videos."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from uvms_mj.cli.common import (EXIT_DIVERGED, EXIT_INTERRUPTED, EXIT_RENDER, SCENARIO, _JSON_HELP, _check_dir,
+                                _check_out, _io_error, _json_dest, _json_metrics, _load, _progress, _read, _warn,
+                                _write_json, metrics_table, packaged_scenarios, scenarios_dir)
+from uvms_mj.plant.params import ParameterError
+
+
+def _run_one(scenario, out: Path, progress: bool = True, source: str | None = None):
+    """Run one scenario into an MCAP log; returns (result, log path, metrics)."""
+    from uvms_mj.sim.experiment import metrics
+    from uvms_mj.io.recorder import LogInUseError, McapRecorder, handle_sigterm
+    from uvms_mj.scenario.schema import ScenarioError, build, resolved, run_scenario
+
+    _check_out(out, protect=(source,))
+    try:
+        plant, ctrl = build(scenario)
+    except (ScenarioError, ParameterError, ValueError) as exc:
+        raise click.UsageError(str(exc)) from None
+    _warn(scenario)
+    meta = {"scenario": resolved(scenario), "seed": scenario.seed}
+    rec_kw = {}
+    if getattr(getattr(plant, "layout", None), "base_free", False):  # a floating robot: the recorder describes it from its model
+        from uvms_mj.scenario.robot import robot_info
+
+        meta["robot"] = robot_info(scenario, plant)
+        rec_kw["model"] = plant.model
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        with _progress(f"{scenario.name} [{scenario.controller.name}]", "sample") as tick, handle_sigterm(), \
+                McapRecorder(out, plant.params, meta, **rec_kw) as rec:
+            try:
+                res = run_scenario(scenario, sink=rec.write_sample, on_sample=tick if progress else None,
+                                   built=(plant, ctrl))
+            except KeyboardInterrupt as exc:
+                rec.close(status="interrupted", reason=str(exc) or "interrupted (Ctrl-C)")
+                click.echo(f"interrupted; partial log closed cleanly: {out}", err=True)
+                sys.exit(EXIT_INTERRUPTED)
+            except (ArithmeticError, ValueError, TypeError, LookupError, RuntimeError) as exc:
+                # A controller or plant that raised mid-run: the log is closed with status "error".
+                reason = " ".join(f"{type(exc).__name__}: {exc}".split())[:400]
+                rec.close(status="error", reason=reason)
+                click.echo(f"log: {out}")
+                click.echo(f"error: the run failed: {reason}", err=True)
+                sys.exit(1)
+            rec.close(status=res.status, reason=res.reason, meta=res.meta)
+    except LogInUseError as exc:
+        raise click.UsageError(str(exc)) from None
+    except OSError as exc:
+        _io_error(out, exc)
+    return res, out, metrics(res)
+
+
+def _plots(log_path: Path, echo=click.echo) -> None:
+    """The plots of a run's log; a run too short (or too broken) to plot gets a warning."""
+    from uvms_mj.analysis.plots import plot_run
+
+    try:
+        paths = plot_run(_read(log_path), log_path.parent, stem=log_path.stem)
+    except OSError as exc:
+        _io_error(log_path.parent, exc)
+    except (ValueError, KeyError, IndexError, TypeError) as exc:
+        click.echo(f"warning: no plots for {log_path}: {exc}", err=True)
+        return
+    for p in paths:
+        echo(f"plot: {p}")
+
+
+def _default_log(scenario, out: str | None, controller: str) -> Path:
+    if out:
+        return Path(out)
+    if scenario.outputs.log:
+        return Path(scenario.outputs.log)
+    return Path("logs") / f"{scenario.name}-{controller}.mcap"
+
+
+def _video(log_path: Path, video_path: Path, scenario=None, echo=click.echo) -> None:
+    log = _read(log_path)
+    kw = {}
+    if scenario is not None:
+        kw = {"fps": scenario.outputs.video_fps, "size": tuple(scenario.outputs.video_size)}
+    _check_out(video_path, kind="video", magic=None)
+    info = _render(log, video_path, log_path, **kw)
+    echo(f"video: {video_path} ({info['frames']} frames)")
+
+
+def _render(log, video_path: Path, log_path, **kw) -> dict:
+    """render_video with GL trouble -> EXIT_RENDER, a log it cannot replay -> usage error,
+    a write failure -> EXIT_IO."""
+    from uvms_mj.analysis.render import RenderError, render_video
+
+    try:
+        with _progress(f"render {video_path.name}", "frame") as tick:
+            return render_video(log, video_path, on_frame=tick, **kw)
+    except RenderError as exc:
+        click.echo(f"error: {exc}", err=True)
+        sys.exit(EXIT_RENDER)
+    except OSError as exc:
+        _io_error(video_path, exc)
+    except (ValueError, KeyError, IndexError, TypeError) as exc:
+        raise click.UsageError(f"{log_path}: cannot be replayed: {type(exc).__name__}: {str(exc)[:200]}") from None
+
+
+@click.command("run")
+@click.argument("scenario", type=SCENARIO)
+@click.option("--set", "sets", multiple=True, metavar="KEY.PATH=VALUE",
+              help="Override a scenario field, e.g. --set controller.name=rac --set plant.current=[0.1,0]")
+@click.option("-o", "--out", type=click.Path(dir_okay=False), default=None,
+              help="Log path (default: the scenario's outputs.log or logs/<name>-<controller>.mcap).")
+@click.option("--video/--no-video", default=None, help="Render an MP4 next to the log (default: outputs.video).")
+@click.option("--plots/--no-plots", default=None, help="Write PNG plots next to the log (default: outputs.plots).")
+@click.option("--json", "json_out", metavar="PATH|-", default=None, help=_JSON_HELP)
+def run_cmd(scenario: str, sets: tuple[str, ...], out: str | None, video: bool | None, plots: bool | None,
+        json_out: str | None) -> None:
+    """Run SCENARIO, write its MCAP log and print a metrics table.
+
+    Exits with 3 if the run diverged (the log is kept, with the reason)."""
+    echo = _json_dest(json_out == "-")
+    sc = _load(scenario, sets)
+    log = _default_log(sc, out, sc.controller.name)
+    if video if video is not None else sc.outputs.video:
+        _check_out(log.with_suffix(".mp4"), kind="video", magic=None)
+    res, log, m = _run_one(sc, log, source=scenario)
+    echo(f"log: {log}")
+    echo(metrics_table({sc.controller.name: m}, {sc.controller.name: res.status}))
+    if json_out:
+        _write_json(_json_metrics({sc.controller.name: {"status": res.status, "reason": res.reason, "log": str(log),
+                                                        "metrics": m}}, sc.name), json_out)
+    if plots if plots is not None else sc.outputs.plots:
+        _plots(log, echo)
+    if video if video is not None else sc.outputs.video:
+        _video(log, log.with_suffix(".mp4"), sc, echo=echo)
+    if res.status != "ok":
+        click.echo(f"error: {res.reason}", err=True)
+        sys.exit(EXIT_DIVERGED)
+
+
+@click.command()
+@click.argument("scenario", type=SCENARIO)
+@click.option("--controllers", default="rac,rac_dob", show_default=True, help="Comma-separated controller names.")
+@click.option("--set", "sets", multiple=True, metavar="KEY.PATH=VALUE", help="Override a scenario field.")
+@click.option("--out-dir", "out_dir", type=click.Path(file_okay=False), default=None,
+              help="Folder for the logs and the comparison figure (default: logs).")
+@click.option("--out", "out_dir_old", type=click.Path(file_okay=False), default=None, hidden=True)
+@click.option("--video/--no-video", default=False, show_default=True, help="Render a video of each run.")
+@click.option("--json", "json_out", metavar="PATH|-", default=None, help=_JSON_HELP)
+def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str | None, out_dir_old: str | None,
+            video: bool, json_out: str | None) -> None:
+    """Run SCENARIO with each controller; print a side-by-side table with ratios, write the logs
+    and one comparison figure (PNG)."""
+    out_dir = out_dir or out_dir_old or "logs"
+    echo = _json_dest(json_out == "-")
+    from uvms_mj.control import available
+    from uvms_mj.analysis.plots import plot_comparison
+
+    names = [c.strip() for c in controllers.split(",") if c.strip()]
+    unknown = [c for c in names if c not in available()]
+    if unknown or not names:
+        raise click.BadParameter(f"unknown controller(s) {', '.join(unknown) or '(none given)'}; "
+                                 f"registered: {', '.join(available())}", param_hint="--controllers")
+    results, logs, failed, status, runs = {}, {}, [], {}, {}
+    _check_dir(out_dir)
+    base = _load(scenario, sets)
+    # Every controller's scenario is checked before any runs (its own parameters: the
+    # scenario's controllers.<name>, or controller.params for the file's controller, or defaults).
+    scs = {name: _load(scenario, tuple(sets) + (f"controller.name={name}",)) for name in names}
+    for name in names:
+        sc = scs[name]
+        path = Path(out_dir) / f"{sc.name}-{name}.mcap"
+        res, path, m = _run_one(sc, path, source=scenario)
+        results[name], logs[name], status[name] = m, path, res.status
+        runs[name] = {"status": res.status, "reason": res.reason, "log": str(path), "metrics": m}
+        echo(f"log: {path}")
+        if res.status != "ok":
+            failed.append(f"{name}: {res.reason}")
+        if video:
+            _video(path, path.with_suffix(".mp4"), sc, echo=echo)
+    echo(metrics_table(results, status))
+    if json_out:
+        _write_json(_json_metrics(runs, base.name), json_out)
+    try:
+        fig = plot_comparison({n: _read(p) for n, p in logs.items()}, Path(out_dir) / f"{base.name}-compare.png")
+        echo(f"figure: {fig}")
+    except OSError as exc:
+        _io_error(Path(out_dir) / f"{base.name}-compare.png", exc)
+    except (ValueError, KeyError, IndexError, TypeError) as exc:
+        click.echo(f"warning: no comparison figure: {exc}", err=True)
+    if failed:
+        click.echo("error: " + "; ".join(failed), err=True)
+        sys.exit(EXIT_DIVERGED)
+
+
+@click.command()
+@click.argument("scenario", type=SCENARIO, required=False)
+@click.option("--set", "sets", multiple=True, metavar="KEY.PATH=VALUE", help="Override a scenario field.")
+@click.option("--list", "list_only", is_flag=True, help="List the packaged scenarios (runnable by name) and exit.")
+def validate(scenario: str | None, sets: tuple[str, ...], list_only: bool) -> None:
+    """Check SCENARIO (schema, values, controller, parameters) without running it."""
+    from uvms_mj.scenario.schema import ScenarioError, build
+
+    if list_only:
+        for name in packaged_scenarios():
+            click.echo(f"{name:<28} {scenarios_dir() / (name + '.yaml')}")
+        return
+    if scenario is None:
+        raise click.UsageError("missing argument SCENARIO (or --list)")
+
+    sc = _load(scenario, sets)
+    try:
+        build(sc)
+    except (ScenarioError, ParameterError, ValueError) as exc:
+        raise click.UsageError(str(exc)) from None
+    _check_out(_default_log(sc, None, sc.controller.name), protect=(scenario,))
+    _warn(sc)
+    click.echo(f"{scenario}: ok ({sc.name}, controller {sc.controller.name}, {sc.duration:g} s)")
