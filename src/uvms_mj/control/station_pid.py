@@ -44,12 +44,28 @@ from uvms_mj.control.base import Command, Controller, ControllerError, Measureme
 DEFAULT_T = 0.02
 
 
-def station_reference(q: np.ndarray, layout) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The station to hold from the first measurement ``q`` (qpos): vehicle position (world
-    [m]), unit quaternion (w, x, y, z), its rotation matrix, and the arm joint angles [rad]."""
+def station_reference(q: np.ndarray, layout, base_reference=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The station to hold: ``base_reference`` (x, y, z [m] world, qw, qx, qy, qz) if given,
+    else the first measurement ``q`` (qpos)'s vehicle pose: vehicle position (world [m]), unit
+    quaternion (w, x, y, z), its rotation matrix, and the arm joint angles [rad] (from ``q``)."""
     a = layout.base_qadr
-    quat = q[a + 3:a + 7] / np.linalg.norm(q[a + 3:a + 7])
-    return q[a:a + 3].copy(), quat, quat_to_mat(quat), q[layout.joint_qadr].copy()
+    pose = q[a:a + 7] if base_reference is None else np.asarray(base_reference, dtype=float)
+    quat = pose[3:7] / np.linalg.norm(pose[3:7])
+    return pose[:3].copy(), quat, quat_to_mat(quat), q[layout.joint_qadr].copy()
+
+
+def check_base_reference(base_reference) -> np.ndarray | None:
+    """``base_reference`` as 7 numbers (x, y, z [m] world, qw, qx, qy, qz), or None.
+
+    Raises:
+        ControllerError: not 7 finite numbers, or a zero quaternion."""
+    if base_reference is None:
+        return None
+    ref = np.asarray(base_reference, dtype=float).ravel()
+    if ref.shape != (7,) or not np.all(np.isfinite(ref)) or np.linalg.norm(ref[3:]) < 1e-9:
+        raise ControllerError(f"base_reference = {base_reference!r} must be 7 finite numbers (x, y, z [m] world, "
+                              "qw, qx, qy, qz; a non-zero quaternion)")
+    return ref
 
 
 def _gains(name: str, value: Any, size: int) -> np.ndarray | None:
@@ -89,6 +105,11 @@ class StationPID(Controller):
             resolved-rate inverse kinematics relative to the station (the vehicle at its reference
             pose), gain ``ik_gain`` [1/s], damping ``ik_damping`` [m]; otherwise
             ``arm_trajectory`` (joint waypoints) or the initial angles.
+        base_reference: the station (x, y, z [m] world, qw, qx, qy, qz); default the first
+            measurement's vehicle pose (the scenario's ``vehicle.setpoint``).
+        base_trajectory: the vehicle origin's path (``position(t)``, ``velocity(t)``, world [m],
+            [m/s]; the scenario's ``vehicle.trajectory``): p_d(t) and, in the D term, v_d(t)
+            (F = Kp e_p + Ki sum(e_p) T + Kd (v_d - v)); the orientation stays the station's.
     """
 
     robots = "floating"
@@ -98,9 +119,15 @@ class StationPID(Controller):
                  bandwidth_base: float = 1.0, bandwidth_attitude: float = 2.0, bandwidth_joints: float = 6.0, damping_ratio: float = 1.0,
                  integral_time: float = 5.0, kp_position=None, kd_position=None, ki_position=None,
                  kp_attitude=None, kd_attitude=None, ki_attitude=None, kp_joints=None, kd_joints=None,
-                 integral_limit: float = 0.5, feedforward: bool = True) -> None:
+                 integral_limit: float = 0.5, feedforward: bool = True, base_reference=None,
+                 base_trajectory=None) -> None:
         if not isinstance(robot, NominalRobot):
             raise ControllerError("station_pid needs robot= a NominalRobot (a floating robot scenario)")
+        self.base_reference = check_base_reference(base_reference)
+        if base_trajectory is not None and not (hasattr(base_trajectory, "position")
+                                                and hasattr(base_trajectory, "velocity")):
+            raise ControllerError(f"base_trajectory = {base_trajectory!r} must have position(t) and velocity(t)")
+        self.base_trajectory = base_trajectory
         self.robot = robot
         self.T = check_positive("T", T)
         self.bandwidth_base = check_positive("bandwidth_base", bandwidth_base)
@@ -141,7 +168,7 @@ class StationPID(Controller):
     def reset(self, measurement: Measurement) -> None:
         r, lay = self.robot, self.robot.layout
         q = np.asarray(measurement.q, dtype=float)
-        self.p_ref, self.quat_ref, self.R_ref, self.q_joint0 = station_reference(q, lay)
+        self.p_ref, self.quat_ref, self.R_ref, self.q_joint0 = station_reference(q, lay, self.base_reference)
         M = r.mass_matrix(q)
         d = lay.base_dadr
         mb = np.diag(M)[d:d + 6]
@@ -205,6 +232,11 @@ class StationPID(Controller):
         self.prev = q.copy()
         self.first = False
 
+        v_ref = np.zeros(3)
+        if self.base_trajectory is not None:  # the vehicle's path: position and velocity references
+            t = measurement.t
+            self.p_ref = np.asarray(self.base_trajectory.position(t), dtype=float)[:3].copy()
+            v_ref = np.asarray(self.base_trajectory.velocity(t), dtype=float)[:3]
         e_p = self.p_ref - p
         e_r = rotation_log(R.T @ self.R_ref)
         lim = self.integral_limit * self.wrench_max
@@ -214,7 +246,7 @@ class StationPID(Controller):
         if np.any(self.ki_r):
             self.int_r = np.clip(self.int_r + e_r * T, -lim[3:] / np.maximum(self.ki_r, 1e-12),
                                  lim[3:] / np.maximum(self.ki_r, 1e-12))
-        F = self.kp_p * e_p + self.ki_p * self.int_p - self.kd_p * v
+        F = self.kp_p * e_p + self.ki_p * self.int_p + self.kd_p * (v_ref - v)
         Mb = self.kp_r * e_r + self.ki_r * self.int_r - self.kd_r * omega
         h = r.hold_force(q) if self.feedforward else np.zeros(r.model.nv)
         F = F + h[d:d + 3]

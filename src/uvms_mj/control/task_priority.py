@@ -104,7 +104,7 @@ from uvms_mj.control.nominal import JointTrajectory, NominalRobot
 from uvms_mj.physics.thrusters import Allocator
 from uvms_mj.control.base import Command, Controller, ControllerError, Measurement, check_positive, register
 from uvms_mj.rotations import quat_to_mat, rotation_log
-from uvms_mj.control.station_pid import DEFAULT_T, station_reference
+from uvms_mj.control.station_pid import DEFAULT_T, check_base_reference, station_reference
 
 #: The priority forms (module docstring).
 PRIORITY_FORMS = ("siciliano_slotine", "singularity_robust")
@@ -263,6 +263,8 @@ class TaskPriority(Controller):
             0.1 bounded the loop's integral action below the moment of a 1 % buoyancy error,
             leaving a 4 deg attitude offset in the sweep study).
         feedforward: add the nominal hold force.
+        base_reference: the vehicle pose to hold (x, y, z [m] world, qw, qx, qy, qz); default the
+            first measurement's (the scenario's ``vehicle.setpoint``).
     """
 
     robots = "floating"
@@ -274,9 +276,10 @@ class TaskPriority(Controller):
                  dls_threshold: float = 1e-2, dls_damping: float = 5e-2, rank_tol: float = 1e-10,
                  bandwidth_base: float = 2.0, bandwidth_attitude: float = 3.0, bandwidth_joints: float = 10.0,
                  damping_ratio: float = 1.0, kp=None, kd=None, reference_lead_limit: float = 1.0,
-                 feedforward: bool = True) -> None:
+                 feedforward: bool = True, base_reference=None) -> None:
         if not isinstance(robot, NominalRobot):
             raise ControllerError("task_priority needs robot= a NominalRobot (a floating robot scenario)")
+        self.base_reference = check_base_reference(base_reference)
         lay = robot.layout
         if not lay.base_free:
             raise ControllerError("task_priority needs a floating robot (a free-joint vehicle)")
@@ -372,7 +375,7 @@ class TaskPriority(Controller):
     def reset(self, measurement: Measurement) -> None:
         r, lay, d = self.robot, self.robot.layout, self.d
         q = np.asarray(measurement.q, dtype=float).copy()
-        self.p_ref, self.quat_ref, self.R_ref, self.q_joint0 = station_reference(q, lay)
+        self.p_ref, self.quat_ref, self.R_ref, self.q_joint0 = station_reference(q, lay, self.base_reference)
         M = r.mass_matrix(q)
         self.tip0 = r.jacobians()["tip"].copy()
         m = np.diag(M)

@@ -160,7 +160,7 @@ def apply_model_overrides(spec: mujoco.MjSpec, overrides: Mapping[str, Any]) -> 
 
 def _planar_value(spec: mujoco.MjSpec, key: str) -> np.ndarray:
     """The paper robot's own value of a parameter key (what a factor multiplies)."""
-    p = read_params(_pm.compile_spec(spec.copy(), native=False, source="model"))
+    p = read_params(_pm.compile_spec(spec, source="model"))  # (compiling leaves the spec as it is)
     head, _, fld = key.partition(".")
     if key == "water_density":
         return np.array([p.rho])

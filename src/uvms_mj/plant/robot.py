@@ -211,7 +211,7 @@ def _model_value(spec: mujoco.MjSpec, key: str, kind: str, name: str, fld: str) 
         if text is None:
             raise ParameterError(f"override {key!r}: the model gives no {fld} to scale (set an absolute value)")
         return np.array([float(x) for x in str(text).split()])
-    m = _pm.compile_spec(spec.copy(), native=False, source="model")
+    m = _pm.compile_spec(spec, source="model")  # (compiling leaves the spec as it is)
     obj = {"body": mujoco.mjtObj.mjOBJ_BODY, "joint": mujoco.mjtObj.mjOBJ_JOINT,
            "actuator": mujoco.mjtObj.mjOBJ_ACTUATOR}[kind]
     i = mujoco.mj_name2id(m, obj, name)

@@ -117,6 +117,7 @@ from uvms_mj.plant.params import (
 )
 from uvms_mj.plant.plant import Plant, default_model_path, models_dir
 from uvms_mj.planar.trajectory import StraightLine
+from uvms_mj.scenario.sections import CurrentSection, Failure, Initial, Vehicle, vehicle_issues, vehicle_params
 from uvms_mj.scenario.base import (  # noqa: F401  (shared names, used here and by uvms_mj.scenario.robot)
     _NO_VALUE,
     ACCEL_MAX,
@@ -351,6 +352,7 @@ class Thrusters(_Section):
     force_range: ForceVec2 = Field(default_factory=_default("force_range"), description="[min, max] [N], min < 0 < max")
     dead_zone: bool = Field(False, description="zero commands inside dead_zone_band")
     dead_zone_band: ForceVec2 = Field(default_factory=_default("dead_zone_band"), description="[low, high] [N]")
+    failures: list[Failure] = Field(default_factory=list, description="thrusters failing during the run")
 
     @model_validator(mode="after")
     def _ranges(self) -> "Thrusters":
@@ -469,6 +471,11 @@ class Scenario(_Section):
     sensors: Sensors = Field(default_factory=Sensors)
     controller: ControllerSection = Field(default_factory=ControllerSection)
     trajectory: Trajectory = Field(default_factory=Trajectory)
+    initial: Initial = Field(default_factory=Initial, description="the initial state (default: the model's "
+                             "keyframe paper_initial); joints by name (joint1, joint2)")
+    current: CurrentSection | None = Field(None, description="the water current (constant, gauss_markov, profile); "
+                                           "plant.current is the older spelling of a constant one")
+    vehicle: Vehicle = Field(default_factory=Vehicle, description="the base's setpoint")
     controllers: dict[str, dict[str, Any]] = Field(
         default_factory=dict, description="per-controller parameters for compare / --set controller.name: "
         "name -> params (controller.params belong to controller.name)")
@@ -513,7 +520,40 @@ class Scenario(_Section):
                             f"unstable with the {self.physics.integrator} integrator at physics.timestep = "
                             f"{dt:.6g} s: the lag integrates stably only for tau > timestep / {bound} = "
                             f"{dt / bound:.6g} s", tau)])
+        issues = _robot_sections_issues(self)
+        if issues:
+            raise _Issues(issues)
         return self
+
+
+def _robot_sections_issues(sc: "Scenario") -> list:
+    """The sections every robot has (initial, current, thrusters.failures, vehicle), checked
+    against the paper robot's model."""
+    from uvms_mj.plant.layout import Layout
+
+    m = _plant_model()
+    lay = Layout.of(m, allow_planar=True)
+    issues = []
+    try:
+        sc.initial.state().apply(m, mujoco.MjData(m), lay)
+    except ParameterError as exc:
+        issues.append((("initial",), str(exc).removeprefix("initial."), _NO_VALUE))
+    if sc.current is not None and any(sc.plant.current):
+        issues.append((("plant", "current"), "give the current in one place: the current section "
+                       "(current.velocity) or plant.current, not both", sc.plant.current))
+    for i, f in enumerate(sc.thrusters.failures):
+        if f.thruster not in lay.thruster_names:
+            issues.append((("thrusters", "failures", i, "thruster"), f"not a thruster of the paper's robot"
+                           f"{_suggest(f.thruster, lay.thruster_names)}; thrusters: {', '.join(lay.thruster_names)}",
+                           f.thruster))
+    if sc.vehicle.trajectory is not None:
+        issues.append((("vehicle", "trajectory"), "the paper's robot takes a vehicle setpoint only (its controllers "
+                       "carry the arm's tip on the trajectory section)", _NO_VALUE))
+    if sc.vehicle.setpoint is not None and sc.controller.base_reference != "measured":
+        issues.append((("vehicle", "setpoint"), "give either vehicle.setpoint or controller.base_reference, not both",
+                       _NO_VALUE))
+    issues += vehicle_issues(Vehicle(setpoint=sc.vehicle.setpoint), sc.controller.name, sc.controller.params)
+    return issues
 
 
 def _take_controller_params(sc) -> None:
@@ -892,11 +932,13 @@ def build(scenario: Scenario) -> tuple[Plant, Any]:
             overrides=plant_overrides(scenario),
             terms=HydroTerms(added_mass=pl.hydro.added_mass, drag=drag_model(scenario), buoyancy=pl.hydro.buoyancy),
             gravity=pl.gravity,
-            current=tuple(pl.current),
+            current=scenario.current.current(scenario.seed) if scenario.current is not None else tuple(pl.current),
             dead_zone=th.dead_zone,
             timestep=ph.timestep,
             integrator=ph.integrator,
             backend=None if ph.backend == "auto" else ph.backend,
+            initial=scenario.initial.state(),
+            failures=[f.failure() for f in th.failures],
         )
         nominal = NominalModel(nominal_params(scenario), gravity=None if scenario.nominal.gravity else (0.0, 0.0))
         tr = scenario.trajectory
@@ -916,6 +958,7 @@ def build(scenario: Scenario) -> tuple[Plant, Any]:
             params["base_reference"] = [float(v) for v in plant.q[:3]]
         elif ref == "nominal":
             params["base_reference"] = [float(v) for v in _nominal_initial_pose()]
+        params.update(vehicle_params(scenario.vehicle, plant))
         ctrl = create(scenario.controller.name, trajectory=path, nominal=nominal, **params)
     except (ParameterError, ControllerError, ValueError) as exc:
         raise ScenarioError(f"scenario {scenario.name!r}: {exc}") from None

@@ -1,0 +1,168 @@
+"""The sections every robot's scenario has (uvms_mj.scenario.sections): initial state, current,
+thruster failures, vehicle setpoint, overrides by role and factor.
+
+Independent truths: the model file's own numbers (a factor times the compiled value), MuJoCo's
+actuator force after a step (a failed thruster), the stationary standard deviation of an
+Ornstein-Uhlenbeck process (sigma, for the Gauss-Markov current), the setpoint itself (where the
+station keeper must bring the vehicle)."""
+
+from __future__ import annotations
+
+import math
+import textwrap
+
+import mujoco
+import numpy as np
+import pytest
+
+from uvms_mj.physics import model as pm
+from uvms_mj.physics.current import Current
+from uvms_mj.plant.plant import Plant, ThrusterFailure
+from uvms_mj.scenario.schema import ScenarioError, build, load_scenario, run_scenario
+
+
+def _load(tmp_path, text: str):
+    p = tmp_path / "s.yaml"
+    p.write_text(textwrap.dedent(text))
+    return load_scenario(p)
+
+
+def test_paper_scenario_initial_joints_and_pose(tmp_path):
+    sc = _load(tmp_path, """
+        duration: 0.5
+        initial:
+          joints: {joint1: 30, joint2: -40}
+          position: [0.1, 0.2, 0.0]
+          orientation: {rpy: [0, 0, -80]}
+    """)
+    plant, ctrl = build(sc)
+    k = math.pi / 180
+    # the section's numbers (degrees -> radians; the yaw through a quaternion: round-off)
+    expected = [0.1, 0.2, -80 * k, 30 * k, -40 * k]
+    np.testing.assert_allclose(plant.q, expected, rtol=0, atol=1e-14)
+    res = run_scenario(sc, built=(plant, ctrl))
+    assert res.status == "ok"
+    np.testing.assert_allclose(res.signals["q_true"][0], expected, rtol=0, atol=1e-14)
+
+
+def test_paper_initial_names_and_plane_checked(tmp_path):
+    with pytest.raises(ScenarioError, match=r"initial: .*joint1x.*did you mean 'joint1'"):
+        _load(tmp_path, "initial: {joints: {joint1x: 10}}")
+    with pytest.raises(ScenarioError, match=r"initial: .*planar base of this robot cannot take that position"):
+        _load(tmp_path, "initial: {position: [0, 0, 0.3]}")
+    with pytest.raises(ScenarioError, match=r"initial: .*cannot take that rotation"):
+        _load(tmp_path, "initial: {orientation: {rpy: [10, 0, 0]}}")
+
+
+def test_overrides_by_role_and_factor():
+    base = Plant("bluerov2_heavy")
+    hull = base.layout.base_body
+    p = Plant("bluerov2_heavy", overrides={"vehicle.mass": "x1.25", "vehicle.volume": "x0.5"})
+    # the factor multiplies the model file's own value (compiled mass; the plugin's volume)
+    assert p.model.body_mass[hull] == pytest.approx(1.25 * base.model.body_mass[hull], rel=1e-15)
+    assert p.hydro_info.bodies[hull].volume == pytest.approx(0.5 * base.hydro_info.bodies[hull].volume, rel=1e-15)
+    # the paper's robot: the vehicle is its base; its own keys take factors too
+    paper0, paper = Plant(), Plant(overrides={"vehicle.volume": "x1.01", "link1.mass": "x2"})
+    assert paper.params.body("base").volume == pytest.approx(1.01 * paper0.params.body("base").volume, rel=1e-15)
+    assert paper.params.body("link1").mass == pytest.approx(2 * paper0.params.body("link1").mass, rel=1e-15)
+    with pytest.raises(ValueError, match="factor"):
+        Plant(overrides={"vehicle.volume": "xabc"})
+
+
+def test_thrusters_role_sets_every_thruster():
+    p = Plant("bluerov2_heavy", overrides={"thrusters.tau": 0.1, "thrusters.forcerange": [-20.0, 25.0]})
+    lay = p.layout
+    np.testing.assert_array_equal(p.model.actuator_forcerange[lay.thruster_ids], [[-20.0, 25.0]] * len(lay.thruster_ids))
+    spec = pm.load_spec(p.model_path)
+    from uvms_mj.plant.robot import apply_overrides
+
+    apply_overrides(spec, {"thrusters.tau": 0.1, "thrusters.dead_zone": [-0.05, 0.05]})
+    cfg = next(dict(x.config) for x in spec.plugins if x.plugin_name == "uvms.thruster")
+    assert cfg["tau"] == "0.1" and cfg["dead_zone"] == "-0.05 0.05"
+
+
+def test_thruster_failure_zeroes_its_force():
+    """From the first sample at or after t the failed thruster gives no force: MuJoCo's own
+    actuator force is zero whatever the command; the others are untouched."""
+    p = Plant(failures=[ThrusterFailure("thruster2", 0.1)])
+    a = p.layout.thruster_ids[1]
+    dt = p.model.opt.timestep
+    forces = []
+    for k in range(40):
+        p.on_sample(k * dt)
+        p.set_thrust([5.0, 5.0, 5.0])
+        p.step()
+        forces.append(p.data.actuator_force[p.layout.thruster_ids].copy())
+    forces = np.array(forces)
+    t = np.arange(40) * dt
+    assert np.all(forces[t < 0.1 - 1e-12, 1] > 0) and np.all(forces[t >= 0.1 - 1e-12, 1] == 0.0)
+    assert np.all(forces[:, 0] > 0) and np.all(forces[:, 2] > 0)
+    p.reset()  # a reset undoes the failure
+    assert np.all(p.model.actuator_forcerange[a] != 0)
+    with pytest.raises(ValueError, match=r"thruster 'thruster9'.*did you mean"):
+        Plant(failures=[ThrusterFailure("thruster9", 1.0)])
+
+
+def test_gauss_markov_current_from_the_scenario(tmp_path):
+    """The current of the section is the plugin's: its stationary std is sigma (an
+    Ornstein-Uhlenbeck process: 4 standard errors of a std estimate from ~T/(2 tau) independent
+    samples), the same seed gives the same current, another seed another."""
+    sigma, tau, T = 0.05, 0.5, 200.0
+
+    def current_series(seed: int) -> np.ndarray:
+        p = Plant(current=Current(model="gauss_markov", velocity=(0.1, 0, 0), mean=(0.1, 0, 0),
+                                  sigma=(sigma, sigma, 0), tau=(tau, tau, tau), seed=seed), gravity=False)
+        out = []
+        n = int(T / p.model.opt.timestep)
+        for _ in range(n // 12):
+            mujoco.mj_step(p.model, p.data, nstep=12)
+            out.append(pm.current_state_of(p.model, p.data)[2].copy())
+        return np.array(out)
+
+    v = current_series(7)
+    n_eff = T / (2 * tau)
+    assert abs(v[:, 0].std() - sigma) < 4 * sigma / math.sqrt(2 * n_eff)
+    assert abs(v[:, 0].mean() - 0.1) < 4 * sigma / math.sqrt(n_eff)
+    np.testing.assert_array_equal(v, current_series(7))
+    assert not np.array_equal(v, current_series(8))
+    sc = _load(tmp_path, """
+        robot: bluerov2_alpha
+        duration: 0.2
+        current: {model: gauss_markov, velocity: [0.1, 0, 0], gauss_markov: {sigma: [0.05, 0.05, 0.0], tau: [5, 5, 5]}}
+    """)
+    plant, _ = build(sc)
+    cfg = pm.hydro_of(plant.model).water
+    assert cfg.current_model == "gauss_markov"
+    with pytest.raises(ScenarioError, match=r"plant\.current: give the current in one place"):
+        _load(tmp_path, "robot: bluerov2_alpha\nplant: {current: [0.1, 0, 0]}\ncurrent: {velocity: [0.1, 0, 0]}\n")
+    with pytest.raises(ScenarioError, match=r"current\.profile: applies to model: profile"):
+        _load(tmp_path, "current: {model: constant, profile: [{z: 0, velocity: [0, 0, 0]}]}\n")
+
+
+def test_robot_scenario_failure_and_vehicle_setpoint(tmp_path):
+    """A robot scenario sets a thruster failure and a vehicle setpoint from the schema alone:
+    the failed thruster logs zero force from its time on; station_pid brings the vehicle to the
+    setpoint (still water, 20 s: within 1 cm and 0.5 deg)."""
+    sc = _load(tmp_path, """
+        robot: bluerov2_heavy
+        duration: 20
+        initial: {position: [0, 0, -2]}
+        thrusters:
+          failures: [{thruster: bluerov2_t8, t: 1.0}]
+        vehicle:
+          setpoint: {position: [0.3, -0.2, -1.9], orientation: {rpy: [0, 0, 15]}}
+        controller: {name: station_pid}
+    """)
+    res = run_scenario(sc)
+    assert res.status == "ok"
+    t, f, q = res.t, res.signals["thrust_force"], res.signals["q_true"]
+    names = res.meta["robot"]["layout"]["thrusters"]
+    j = names.index("bluerov2_t8")
+    assert np.all(f[t >= 1.0 - 1e-12, j] == 0.0) and np.any(f[t < 1.0, j] != 0.0)
+    np.testing.assert_allclose(q[-1, :3], [0.3, -0.2, -1.9], atol=0.01)
+    yaw = 2 * math.atan2(q[-1, 6], q[-1, 3])
+    assert abs(yaw - math.radians(15)) < math.radians(0.5)
+    with pytest.raises(ScenarioError, match=r"vehicle\.setpoint: controller 'pd' takes no vehicle setpoint"):
+        _load(tmp_path, "vehicle: {setpoint: {position: [0, 0, 0]}}\ncontroller: {name: pd}\n")
+    with pytest.raises(ScenarioError, match=r"thrusters\.failures\[0\]\.thruster: not a thruster"):
+        _load(tmp_path, "robot: bluerov2_heavy\nthrusters: {failures: [{thruster: t99, t: 1}]}\n")
