@@ -166,3 +166,27 @@ def test_robot_scenario_failure_and_vehicle_setpoint(tmp_path):
         _load(tmp_path, "vehicle: {setpoint: {position: [0, 0, 0]}}\ncontroller: {name: pd}\n")
     with pytest.raises(ScenarioError, match=r"thrusters\.failures\[0\]\.thruster: not a thruster"):
         _load(tmp_path, "robot: bluerov2_heavy\nthrusters: {failures: [{thruster: t99, t: 1}]}\n")
+
+
+def test_validate_resolved_prints_a_valid_scenario(tmp_path):
+    """``validate --resolved`` prints every default filled in; that output is itself a scenario
+    that validates and resolves to the same thing."""
+    import subprocess
+    import sys
+
+    import yaml
+
+    src = tmp_path / "s.yaml"
+    src.write_text("robot: bluerov2_alpha\nduration: 1\ncurrent: {model: gauss_markov, velocity: [0.1, 0, 0]}\n"
+                   "vehicle: {setpoint: {position: [0, 0, -1]}}\n")
+    run = lambda path: subprocess.run([sys.executable, "-m", "uvms_mj.cli.main", "validate", str(path), "--resolved"],  # noqa: E731
+                                      capture_output=True, text=True, cwd=tmp_path)
+    first = run(src)
+    assert first.returncode == 0, first.stderr
+    data = yaml.safe_load(first.stdout)
+    assert data["current"]["model"] == "gauss_markov" and data["controller"]["params"]["T"] == 0.02
+    again = tmp_path / "resolved.yaml"
+    again.write_text(first.stdout)
+    second = run(again)
+    assert second.returncode == 0, second.stderr
+    assert yaml.safe_load(second.stdout) == data

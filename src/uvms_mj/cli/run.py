@@ -202,9 +202,12 @@ def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str
 @click.argument("scenario", type=SCENARIO, required=False)
 @click.option("--set", "sets", multiple=True, metavar="KEY.PATH=VALUE", help="Override a scenario field.")
 @click.option("--list", "list_only", is_flag=True, help="List the packaged scenarios (runnable by name) and exit.")
-def validate(scenario: str | None, sets: tuple[str, ...], list_only: bool) -> None:
-    """Check SCENARIO (schema, values, controller, parameters) without running it."""
-    from uvms_mj.scenario.schema import ScenarioError, build
+@click.option("--resolved", "show_resolved", is_flag=True,
+              help="Print the fully resolved scenario (every default filled in) as YAML on stdout.")
+def validate(scenario: str | None, sets: tuple[str, ...], list_only: bool, show_resolved: bool) -> None:
+    """Check SCENARIO (schema, values, controller, parameters) without running it; --resolved
+    prints the resolved scenario (itself a valid scenario describing the same run)."""
+    from uvms_mj.scenario.schema import ScenarioError, build, resolved
 
     if list_only:
         for name in packaged_scenarios():
@@ -220,4 +223,10 @@ def validate(scenario: str | None, sets: tuple[str, ...], list_only: bool) -> No
         raise click.UsageError(str(exc)) from None
     _check_out(_default_log(sc, None, sc.controller.name), protect=(scenario,))
     _warn(sc)
+    if show_resolved:
+        import yaml
+
+        click.echo(yaml.safe_dump(resolved(sc), sort_keys=False, default_flow_style=None), nl=False)
+        click.echo(f"{scenario}: ok ({sc.name}, controller {sc.controller.name}, {sc.duration:g} s)", err=True)
+        return
     click.echo(f"{scenario}: ok ({sc.name}, controller {sc.controller.name}, {sc.duration:g} s)")
