@@ -1,6 +1,6 @@
 """The plant: the MuJoCo model of the robot, in water through the uvms plugins.
 
-``Plant()`` loads ``models/scene.xml`` (robot + scene). The robot file carries its hydrodynamics
+``Plant()`` loads ``models/paper/scene.xml`` (robot + scene). The robot file carries its hydrodynamics
 as attributes of the ``uvms.water`` / ``uvms.hydro`` MuJoCo plugins (``docs/hydrodynamics.md``),
 so plain ``mujoco.mj_step`` / ``mujoco.mj_forward`` on ``plant.model`` and ``plant.data`` (or on
 any other MjData of that model) include them with every integrator (Euler, implicit, RK4):
@@ -61,7 +61,8 @@ _SNAPSHOT = mujoco.mjtState.mjSTATE_INTEGRATION
 _PKG = Path(__file__).resolve().parents[1]  # the uvms_mj package folder
 
 def models_dir() -> Path:
-    """Folder holding uvms.xml and scene.xml (the repository's ``models/``, or the packaged copy)."""
+    """Folder of the robot models, one sub-folder per robot, and ``uvms.xml`` (the paper's robot)
+    (the repository's ``models/``, or the packaged copy)."""
     for cand in (_PKG.parents[1] / "models", _PKG / "models"):
         if (cand / "uvms.xml").is_file():
             return cand
@@ -69,8 +70,8 @@ def models_dir() -> Path:
 
 
 def default_model_path() -> Path:
-    """The default plant model: ``models/scene.xml`` (robot + floor, lights, cameras)."""
-    return models_dir() / "scene.xml"
+    """The default plant model: ``models/paper/scene.xml`` (robot + floor, lights, cameras)."""
+    return models_dir() / "paper" / "scene.xml"
 
 
 # MuJoCo's own warnings (mju_warning: e.g. "Nan, Inf or huge value in QACC") go by default to
@@ -205,7 +206,7 @@ class Plant:
     """The robot in MuJoCo with exact added mass, strip drag, buoyancy, thrusters and current.
 
     Args:
-        model: path of an MJCF file (default: ``models/scene.xml``).
+        model: path of an MJCF file (default: ``models/paper/scene.xml``).
         overrides: parameter overrides applied to the model before it is compiled, keys as in
             :data:`uvms_mj.plant.params.OVERRIDE_KEYS` (e.g. ``{"base.volume": 0.03}``).
         terms: which hydrodynamic terms to apply (:class:`HydroTerms`, all on by default).

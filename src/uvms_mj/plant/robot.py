@@ -63,13 +63,14 @@ __all__ = [
     "rpy_from_quat",
 ]
 
-#: Built-in robots: name -> file in ``models/`` ("paper" is the planar robot of the paper and
-#: runs on :class:`uvms_mj.plant.plant.Plant`).
+#: Built-in robots: name -> file in ``models/``, one folder per robot (``models/README.md``;
+#: "paper" is the planar robot of the paper, with its scene, and runs on
+#: :class:`uvms_mj.plant.plant.Plant`).
 BUILTIN_ROBOTS: dict[str, str] = {
-    "paper": "scene.xml",
-    "bluerov2_heavy": "bluerov2_heavy.xml",
-    "bluerov2_alpha": "bluerov2_alpha.xml",
-    "hinsdale2023": "hinsdale2023.xml",
+    "paper": "paper/scene.xml",
+    "bluerov2_heavy": "bluerov2_heavy/bluerov2_heavy.xml",
+    "bluerov2_alpha": "bluerov2_alpha/bluerov2_alpha.xml",
+    "hinsdale2023": "hinsdale2023/hinsdale2023.xml",
 }
 
 #: Override fields by element kind -> {field: (what, expected shape or None for a string)}.
@@ -543,7 +544,7 @@ class RobotPlant(Plant):
     ) -> None:
         install_mujoco_warning_handler()
         path = robot_path(model)
-        if path.name == BUILTIN_ROBOTS["paper"] and path.parent == models_dir():
+        if path == models_dir() / BUILTIN_ROBOTS["paper"]:
             raise ParameterError("robot 'paper' runs on uvms_mj.plant.plant.Plant, not RobotPlant")
         if terms.added_mass not in ("exact", "off") or terms.drag not in ("strip", "off"):
             raise ParameterError(f"terms = {terms!r}: RobotPlant supports added_mass exact|off, drag strip|off")
