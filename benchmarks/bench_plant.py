@@ -2,9 +2,9 @@
 
     python benchmarks/bench_plant.py [--seconds 10] [--repeats 5] [--rollouts 64]
 
-For each robot (the paper's planar robot ``models/scene.xml``, the 3-D test robot
+For each robot (the paper's planar robot ``models/paper/scene.xml``, the 3-D test robot
 ``tests/models/robot3d.xml``: a free-floating base with a 4-link arm, and the BlueROV2 Heavy
-with an Alpha-class arm ``models/bluerov2_alpha.xml``) and each setting (the model's own integrator at
+with an Alpha-class arm ``models/bluerov2_alpha/bluerov2_alpha.xml``) and each setting (the model's own integrator at
 the model's step, Euler at 1/600 s), plain ``mujoco.mj_step`` loops on:
 
 * bare: the same model file with the uvms plugins removed (no hydrodynamics);
@@ -34,7 +34,7 @@ from uvms_mj.physics import python_backend
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOTS = {"paper (5 dof)": default_model_path(), "robot3d (10 dof)": ROOT / "tests" / "models" / "robot3d.xml",
-          "bluerov2_alpha (10 dof)": ROOT / "models" / "bluerov2_alpha.xml"}
+          "bluerov2_alpha (10 dof)": ROOT / "models" / "bluerov2_alpha" / "bluerov2_alpha.xml"}
 
 
 def best_time(fn, n: int, repeats: int) -> float:

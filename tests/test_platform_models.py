@@ -1,5 +1,5 @@
-"""The 3-D platform models (models/bluerov2_heavy.xml, alpha_arm.xml, bluerov2_alpha.xml,
-hinsdale2023.xml) against truths of their own.
+"""The 3-D platform models (models/<name>/<name>.xml: bluerov2_heavy, alpha_arm, bluerov2_alpha,
+hinsdale2023) against truths of their own.
 
 Every expected number here is computed in this file from the published parameters (von Benzon
 et al. 2022 Table A1 and thruster layout, the Alpha link table, the Hinsdale reference model),
@@ -77,7 +77,7 @@ def allocation_hand() -> np.ndarray:
 
 @pytest.fixture(scope="module")
 def models():
-    return {n: mujoco.MjModel.from_xml_path(str(MODELS / f"{n}.xml")) for n in NAMES}
+    return {n: mujoco.MjModel.from_xml_path(str(MODELS / n / f"{n}.xml")) for n in NAMES}
 
 
 def body(m, name):
@@ -90,7 +90,7 @@ def body(m, name):
 @pytest.mark.parametrize("name", NAMES)
 def test_loads_plain_and_checked(name, models):
     m = models[name]
-    m2 = load_model(MODELS / f"{name}.xml")
+    m2 = load_model(MODELS / name / f"{name}.xml")
     assert m2.nq == m.nq and m2.nu == m.nu and m2.nbody == m.nbody
     assert hydro_of(m2).native and hydro_of(m).water.density == RHO
     # Joint limits on every hinge, ranges on every actuator; no contacts anywhere.
@@ -326,7 +326,7 @@ def welded(name: str, qarm) -> mujoco.MjModel:
     """The model with its arm joints removed and the links welded at the angles qarm (each
     child body turned about its joint axis; the joints sit at the body origins), thrusters and
     arm motors kept out of the way (no commands)."""
-    spec = mujoco.MjSpec.from_file(str(MODELS / f"{name}.xml"))
+    spec = mujoco.MjSpec.from_file(str(MODELS / name / f"{name}.xml"))
     for jname, q in zip(("alpha_base", "alpha_shoulder", "alpha_elbow", "alpha_wrist"), qarm):
         j = spec.joint(jname)
         assert np.allclose(j.pos, 0)
@@ -349,7 +349,7 @@ def test_rest_attitude_by_simulation(name, models):
     free joint and the net hydrostatic force carried at the vehicle origin (as steady sinking
     drag at the origin would), the vehicle comes to rest at the hand-computed attitude."""
     q = arm_pose(models[name], name)
-    m = welded(name, q) if name != "bluerov2_heavy" else load_model(MODELS / f"{name}.xml")
+    m = welded(name, q) if name != "bluerov2_heavy" else load_model(MODELS / name / f"{name}.xml")
     m.opt.integrator = mujoco.mjtIntegrator.mjINT_IMPLICITFAST
     m.opt.timestep = 0.01
     m.dof_damping[:6] = [20, 20, 20, 2, 2, 2]  # changes the way there, not the rest state
@@ -454,7 +454,7 @@ CASES = {"surge": [0.15, 0.15, -0.15, -0.15, 0, 0, 0, 0],
 
 @pytest.fixture(scope="module")
 def vehicle():
-    m = load_model(MODELS / "bluerov2_heavy.xml")
+    m = load_model(MODELS / "bluerov2_heavy" / "bluerov2_heavy.xml")
     m.opt.timestep = 0.001
     m.opt.integrator = mujoco.mjtIntegrator.mjINT_RK4
     return m

@@ -2,7 +2,7 @@
 nominal model's hold force, station_pid, and robot scenarios.
 
 Independent truths: hand computation from the model files' parameters (von Benzon et al. 2022
-numbers of models/bluerov2_heavy*.xml), rotation matrices built by hand, MuJoCo's own
+numbers of models/bluerov2_heavy/*.xml), rotation matrices built by hand, MuJoCo's own
 quaternion functions, the thrust curve's forward evaluation, and the damping law at the steady
 current speed.
 """
@@ -35,7 +35,7 @@ from uvms_mj.physics.thrusters import CurveInverse, allocation_matrix, invert_cu
 REPO = Path(__file__).resolve().parents[1]
 G = 9.81
 RHO = 1000.0
-# [vB] von Benzon et al. 2022 (models/bluerov2_heavy.xml, bluerov2_heavy_hull.xml)
+# [vB] von Benzon et al. 2022 (models/bluerov2_heavy/bluerov2_heavy.xml, bluerov2_heavy_hull.xml)
 MASS, VOLUME, COB_Z = 13.5, 0.0134, 0.01
 LIN_DAMP = (13.7, 0.0, 33.0)
 QUAD_DAMP = (141.0, 217.0, 190.0)
@@ -55,7 +55,7 @@ def test_layout_by_name():
 def test_robot_path_errors():
     with pytest.raises(ParameterError, match="did you mean 'bluerov2_alpha'"):
         robot_path("bluerov2_alpa")
-    assert robot_path("hinsdale2023").name == "hinsdale2023.xml"
+    assert robot_path("hinsdale2023") == REPO / "models" / "hinsdale2023" / "hinsdale2023.xml"
 
 
 def test_named_overrides_reach_the_model():

@@ -24,7 +24,7 @@ pytest.importorskip("scipy")
 from uvms_mj.analysis.hydrostatics import equilibrium_attitude, hydrostatic_moment, static_check  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
-MODEL = REPO / "models" / "hinsdale2023.xml"
+MODEL = REPO / "models" / "hinsdale2023" / "hinsdale2023.xml"
 OFFSETS = np.array([3.07, 0.0, 0.0, 2.879])  # the model's numeric, stated independently
 
 

@@ -309,7 +309,7 @@ def static_check(m: mujoco.MjModel, trials: Iterable, post_window: float = 2.0,
     """Predicted hydrostatic attitude changes against the measured ones, per trial and overall.
 
     Args:
-        m: the compiled model of the configuration (e.g. ``models/hinsdale2023.xml``).
+        m: the compiled model of the configuration (e.g. ``models/hinsdale2023/hinsdale2023.xml``).
         trials: :class:`uvms_mj.analysis.trials.Trial` objects (or a ``TrialSet``).
         post_window: the end window, the last ``post_window`` seconds of the trial [s].
         pre_window: the start window of a trial with no start time (from its first sample) [s];

@@ -28,7 +28,7 @@ Per trial (:func:`simulate_trial`):
    whole configuration is neutrally buoyant, as the trials (free floating for tens of seconds)
    show; the change sits at the vehicle's origin (its centre of gravity), so it moves no
    equilibrium taken about that point (:mod:`uvms_mj.analysis.hydrostatics`). The model as written
-   sinks at 10.45 N (see ``models/hinsdale2023.xml``). An override of ``bluerov2.mass`` wins.
+   sinks at 10.45 N (see ``models/hinsdale2023/hinsdale2023.xml``). An override of ``bluerov2.mass`` wins.
 5. **Comparison.** Simulated roll and pitch (Z-Y-X Euler angles, as :func:`trials.roll_pitch_yaw`)
    are interpolated to the IMU's own time stamps; per trial: RMS error of roll and pitch, the
    best constant lag within +-``SimConfig.lag_window`` s (:func:`best_lag`) and the RMS after
@@ -80,7 +80,7 @@ __all__ = [
     "simulate_trial",
 ]
 
-#: The model of the Hinsdale 2023 configuration (``models/<name>.xml``).
+#: The model of the Hinsdale 2023 configuration (``models/<name>/<name>.xml``).
 DEFAULT_MODEL = "hinsdale2023"
 #: Largest allowed tracking error of the imposed arm motion [deg].
 MAX_TRACKING_ERROR_DEG = 0.1
@@ -210,13 +210,13 @@ def apply_overrides(spec: mujoco.MjSpec, overrides: Mapping[str, Any], source: s
 
 
 def model_path(model: str | Path) -> Path:
-    """``models/<name>.xml`` for a bare name, else the path itself."""
+    """``models/<name>/<name>.xml`` for a bare name, else the path itself."""
     p = Path(model)
     if p.suffix == ".xml" or p.exists():
         return p
     from uvms_mj.plant.plant import models_dir
 
-    return models_dir() / f"{model}.xml"
+    return models_dir() / str(model) / f"{model}.xml"
 
 
 def build_model(model: str | Path = DEFAULT_MODEL, overrides: Mapping[str, Any] | None = None,

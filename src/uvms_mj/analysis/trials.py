@@ -352,7 +352,7 @@ def roll_pitch_yaw(quat_xyzw: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.nd
 
 def joint_offsets(model=None) -> np.ndarray:
     """The joint offsets (base, shoulder, elbow, wrist) [rad] of ``<numeric
-    name="hinsdale:joint_offsets">`` in a compiled model (default: ``models/hinsdale2023.xml``).
+    name="hinsdale:joint_offsets">`` in a compiled model (default: ``models/hinsdale2023/hinsdale2023.xml``).
 
     Raises:
         KeyError: the model has no such numeric; ValueError: it has not 4 values.
@@ -361,7 +361,7 @@ def joint_offsets(model=None) -> np.ndarray:
         from uvms_mj.physics import load_model
         from uvms_mj.plant.plant import models_dir
 
-        model = load_model(models_dir() / "hinsdale2023.xml")
+        model = load_model(models_dir() / "hinsdale2023" / "hinsdale2023.xml")
     try:
         data = np.array(model.numeric(OFFSETS_NUMERIC).data, float)
     except KeyError as e:
@@ -580,7 +580,7 @@ def load_trials(folder: str | Path, model=None, offsets: Iterable[float] | None 
     Args:
         folder: the trials folder.
         model: compiled model whose ``hinsdale:joint_offsets`` numeric maps axes to joint angles
-            (default: ``models/hinsdale2023.xml``); ignored if ``offsets`` is given.
+            (default: ``models/hinsdale2023/hinsdale2023.xml``); ignored if ``offsets`` is given.
         offsets: the 4 offsets (base, shoulder, elbow, wrist) [rad] directly.
         names: read only these trials (a name with no files at all is reported and skipped).
         max_gap: largest allowed time between consecutive rows of a file [s].

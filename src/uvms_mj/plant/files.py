@@ -17,7 +17,8 @@ _PKG = Path(__file__).resolve().parents[1]  # the uvms_mj package folder
 
 
 def models_dir() -> Path:
-    """Folder holding uvms.xml and scene.xml (the repository's ``models/``, or the packaged copy)."""
+    """Folder of the robot models, one sub-folder per robot, and ``uvms.xml`` (the paper's robot)
+    (the repository's ``models/``, or the packaged copy)."""
     for cand in (_PKG.parents[1] / "models", _PKG / "models"):
         if (cand / "uvms.xml").is_file():
             return cand
@@ -25,17 +26,18 @@ def models_dir() -> Path:
 
 
 def default_model_path() -> Path:
-    """The default plant model: ``models/scene.xml`` (robot + floor, lights, cameras)."""
-    return models_dir() / "scene.xml"
+    """The default plant model: ``models/paper/scene.xml`` (robot + floor, lights, cameras)."""
+    return models_dir() / "paper" / "scene.xml"
 
 
-#: Built-in robots: name -> file in ``models/`` ("paper": the paper's planar robot in its scene;
-#: every robot runs on :class:`uvms_mj.plant.plant.Plant`).
+#: Built-in robots: name -> file in ``models/``, one folder per robot (``models/README.md``;
+#: "paper": the paper's planar robot in its scene; every robot runs on
+#: :class:`uvms_mj.plant.plant.Plant`).
 BUILTIN_ROBOTS: dict[str, str] = {
-    "paper": "scene.xml",
-    "bluerov2_heavy": "bluerov2_heavy.xml",
-    "bluerov2_alpha": "bluerov2_alpha.xml",
-    "hinsdale2023": "hinsdale2023.xml",
+    "paper": "paper/scene.xml",
+    "bluerov2_heavy": "bluerov2_heavy/bluerov2_heavy.xml",
+    "bluerov2_alpha": "bluerov2_alpha/bluerov2_alpha.xml",
+    "hinsdale2023": "hinsdale2023/hinsdale2023.xml",
 }
 
 

@@ -1,6 +1,6 @@
 """The plant: any robot's MuJoCo model, in water through the uvms plugins.
 
-``Plant()`` loads the paper's robot in its scene (``robot: paper``, ``models/scene.xml``);
+``Plant()`` loads the paper's robot in its scene (``robot: paper``, ``models/paper/scene.xml``);
 ``Plant("bluerov2_alpha")`` or ``Plant("my_robot.xml")`` any other robot. Every robot file
 carries its hydrodynamics as attributes of the ``uvms.water`` / ``uvms.hydro`` MuJoCo plugins and
 its thrusters as site actuators (``docs/hydrodynamics.md``), so plain ``mujoco.mj_step`` /
@@ -194,7 +194,7 @@ class Plant(Stepping):
 
     Args:
         model: a built-in robot name (:data:`uvms_mj.plant.files.BUILTIN_ROBOTS`) or an MJCF
-            path; default the paper's robot in its scene (``models/scene.xml``).
+            path; default the paper's robot in its scene (``models/paper/scene.xml``).
         overrides: parameter overrides applied to the model before it is compiled
             (:func:`apply_model_overrides`: by element name, ``{"vehicle.mass": "x1.1"}``; the
             paper robot's own keys too, e.g. ``{"base.volume": 0.03}``).
