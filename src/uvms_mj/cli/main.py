@@ -20,6 +20,7 @@ disk; the message names the file); 130 interrupted (Ctrl-C or SIGTERM; the log i
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
@@ -72,10 +73,19 @@ def metrics_table(results: dict[str, dict[str, float]], status: dict[str, str] |
 
 
 class _Group(click.Group):
-    """Ctrl-C anywhere exits with 130, not click's "Aborted!" with 1. (The installed command
-    gets a SIGINT handler that exits 130 at once from its first import on, see
-    uvms_mj/__init__.py; runs and sweeps replace it with :func:`uvms_mj.io.recorder.handle_sigterm`,
-    which closes the log first.)"""
+    """Ctrl-C anywhere exits with 130, not click's "Aborted!" with 1: while the command runs a
+    SIGINT handler exits 130 at once, quietly (restored when it returns); runs and sweeps replace
+    it with :func:`uvms_mj.io.recorder.handle_sigterm`, which closes the log first. A bad
+    ``UVMS_MJ_COMPILED`` (or a former switch set) is one line and exit 2."""
+
+    def main(self, *args, **kwargs):  # noqa: ANN002, ANN003
+        import signal
+
+        old = signal.signal(signal.SIGINT, lambda *_: (sys.stderr.write("interrupted\n"), os._exit(EXIT_INTERRUPTED)))
+        try:
+            return super().main(*args, **kwargs)
+        finally:
+            signal.signal(signal.SIGINT, old)
 
     def make_context(self, *args, **kwargs):  # noqa: ANN002, ANN003
         try:
@@ -84,6 +94,13 @@ class _Group(click.Group):
             _interrupted()
 
     def invoke(self, ctx):  # noqa: ANN001
+        from uvms_mj.physics.build import CompiledModeError, compiled_mode
+
+        try:
+            compiled_mode()
+        except CompiledModeError as exc:
+            click.echo(f"error: {exc}", err=True)
+            sys.exit(2)
         try:
             return super().invoke(ctx)
         except KeyboardInterrupt:
