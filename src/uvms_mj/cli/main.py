@@ -21,8 +21,20 @@ disk; the message names the file); 130 interrupted (Ctrl-C or SIGTERM; the log i
 from __future__ import annotations
 
 import os
+import signal
 import sys
 from pathlib import Path
+
+
+def _exit_130(*_) -> None:
+    """SIGINT: exit 130 at once, quietly (no KeyboardInterrupt traceback, none swallowed by an
+    import lock's callback)."""
+    sys.stderr.write("interrupted\n")
+    os._exit(130)
+
+
+if sys.argv and os.path.basename(sys.argv[0]) == "uvms-mj":  # only the installed command's own process,
+    signal.signal(signal.SIGINT, _exit_130)  # starting up: a Ctrl-C during its imports (never an importer)
 
 import click
 import numpy as np
@@ -74,14 +86,16 @@ def metrics_table(results: dict[str, dict[str, float]], status: dict[str, str] |
 
 class _Group(click.Group):
     """Ctrl-C anywhere exits with 130, not click's "Aborted!" with 1: while the command runs a
-    SIGINT handler exits 130 at once, quietly (restored when it returns); runs and sweeps replace
-    it with :func:`uvms_mj.io.recorder.handle_sigterm`, which closes the log first. A bad
+    SIGINT handler exits 130 at once, quietly (:func:`_exit_130`, restored when it returns; the
+    installed command's process has it from its start); runs and sweeps replace it with
+    :func:`uvms_mj.io.recorder.handle_sigterm`, which closes the log first. A bad
     ``UVMS_MJ_COMPILED`` (or a former switch set) is one line and exit 2."""
 
     def main(self, *args, **kwargs):  # noqa: ANN002, ANN003
-        import signal
-
-        old = signal.signal(signal.SIGINT, lambda *_: (sys.stderr.write("interrupted\n"), os._exit(EXIT_INTERRUPTED)))
+        try:
+            old = signal.signal(signal.SIGINT, _exit_130)
+        except ValueError:  # not the main thread: signals are not ours to handle
+            return super().main(*args, **kwargs)
         try:
             return super().main(*args, **kwargs)
         finally:
