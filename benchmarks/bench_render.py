@@ -21,9 +21,12 @@ import tempfile
 import time
 from pathlib import Path
 
-import uvms_mj  # noqa: F401  (chooses MUJOCO_GL before mujoco is imported)
-from uvms_mj.sim.experiment import PaperExperiment
-from uvms_mj.analysis.render import RenderError, _open_writer, gl_status, render_frames, render_video
+from uvms_mj.analysis.render_gl import configure_gl
+
+configure_gl()  # a rendering-only entry path: MUJOCO_GL chosen (headless) before mujoco is imported
+
+from uvms_mj.sim.experiment import PaperExperiment  # noqa: E402
+from uvms_mj.analysis.render import RenderError, _open_writer, gl_status, render_frames, render_video  # noqa: E402
 
 
 def main() -> int:

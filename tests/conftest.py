@@ -12,6 +12,11 @@ import numpy as np
 import pytest
 
 from uvms_mj import Plant
+from uvms_mj.physics import build as _build
+
+# The uvms plugins registered once for the suite: uvms_mj's loaders do it on first use (not
+# `import uvms_mj`), and some tests hand model files to plain MuJoCo first.
+_build.register_plugins()
 
 #: Overrides that make the arm dynamically negligible (1e-6 kg, no hydrodynamics): the base then
 #: behaves as a base-only model to ~1e-8 relative (arm/base mass ratio), well inside the

@@ -107,15 +107,24 @@ def test_mixed_backends_in_one_process():
 
 
 def test_backend_choice(monkeypatch):
-    monkeypatch.setenv("UVMS_MJ_BACKEND", "python")
+    """The default backend follows UVMS_MJ_COMPILED (off: python, on: native); an explicit
+    backend= wins; a bad value or a former switch is a one-line CompiledModeError."""
+    monkeypatch.setenv("UVMS_MJ_COMPILED", "off")
     assert Plant().backend == "python"
-    monkeypatch.delenv("UVMS_MJ_BACKEND")
+    assert Plant(backend="python").backend == "python"
+    monkeypatch.setenv("UVMS_MJ_COMPILED", "on")
+    assert Plant().backend == "native"
+    monkeypatch.delenv("UVMS_MJ_COMPILED")
     assert Plant().backend == "native"
     assert Plant(terms=HydroTerms(added_mass="lagged"), backend="native").backend == "python"
     with pytest.raises(ParameterError, match=r"backend = 'fortran'; allowed: auto, python, native"):
         Plant(backend="fortran")
-    monkeypatch.setenv("UVMS_MJ_BACKEND", "fast")
-    with pytest.raises(ParameterError, match=r"UVMS_MJ_BACKEND='fast'; allowed: auto, python, native"):
+    monkeypatch.setenv("UVMS_MJ_COMPILED", "fast")
+    with pytest.raises(build.CompiledModeError, match=r"UVMS_MJ_COMPILED='fast' is not one of auto, on, off"):
+        Plant()
+    monkeypatch.delenv("UVMS_MJ_COMPILED")
+    monkeypatch.setenv("UVMS_MJ_BACKEND", "python")
+    with pytest.raises(build.CompiledModeError, match=r"UVMS_MJ_BACKEND=python is no longer read.*UVMS_MJ_COMPILED"):
         Plant()
 
 
@@ -128,25 +137,32 @@ def test_unavailable_plugins_native_is_an_error(monkeypatch):
 
 @pytest.mark.slow
 def test_without_a_compiler_everything_falls_back(tmp_path):
-    """A fresh process with no compiler and an empty cache: `import uvms_mj` says so in one line,
-    the plant runs on the Python backend (with the model file's plugins stripped) and gives the
-    native trajectory (1e-9)."""
+    """A fresh process with no compiler and an empty cache: `import uvms_mj` is silent, the
+    first plant says so in one warning (one for every compiled path), runs on the Python backend
+    (with the model file's plugins stripped) and gives the native trajectory (1e-9)."""
     code = textwrap.dedent("""
         import warnings, numpy as np
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             import uvms_mj
+            assert not caught, [str(w.message) for w in caught]
+            from uvms_mj import Plant
+            p = Plant()
+            p.set_state(base_velocity=(0.1, -0.05, 0.2))
+            p.step(240)
+            p.step_observe(2)
+            from uvms_mj.sim.experiment import PaperExperiment
+            assert PaperExperiment(duration=0.2, controller="rac").run().status == "ok"
         msgs = [str(w.message) for w in caught if "uvms_mj" in str(w.message)]
-        assert len(msgs) == 1 and "\\n" not in msgs[0] and "C plugins are unavailable" in msgs[0], msgs
-        from uvms_mj import Plant
-        p = Plant()
+        assert len(msgs) == 1 and "\\n" not in msgs[0] and "C plugins unavailable" in msgs[0], msgs
         assert p.backend == "python"
+        p.reset()
         p.set_state(base_velocity=(0.1, -0.05, 0.2))
         p.step(240)
         np.save(OUT, np.r_[p.q, p.qd])
     """).replace("OUT", repr(str(tmp_path / "q.npy")))
     env = {**os.environ, "CC": "/nonexistent/cc", "UVMS_MJ_CACHE": str(tmp_path / "cache")}
-    env.pop("UVMS_MJ_BACKEND", None)
+    env.pop("UVMS_MJ_COMPILED", None)
     res = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr
     p = Plant()

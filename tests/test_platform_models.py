@@ -19,7 +19,7 @@ import pytest
 from scipy.integrate import solve_ivp
 from scipy.optimize import fsolve
 
-import uvms_mj  # noqa: F401  (registers the uvms plugins)
+import uvms_mj  # noqa: F401  (the plugins: registered once by conftest.py)
 from uvms_mj.physics import hydro_of, load_model
 
 MODELS = Path(__file__).resolve().parents[1] / "models"

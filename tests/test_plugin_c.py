@@ -23,7 +23,7 @@ import pytest
 from uvms_mj.physics import build
 
 pytestmark = pytest.mark.skipif(
-    os.environ.get("UVMS_MJ_PLUGIN", "").strip().lower() == "off" or not build.register_plugins(),
+    os.environ.get("UVMS_MJ_COMPILED", "").strip().lower() == "off" or not build.register_plugins(),
     reason=f"uvms plugins unavailable: {build.unavailable_reason()}",
 )
 
@@ -120,7 +120,7 @@ def test_plugin_off_and_no_compiler_fallback_in_subprocess(tmp_path):
         from uvms_mj.physics import build
         ok = build.register_plugins()
         out = {"ok": ok, "reason": build.unavailable_reason()}
-        os.environ.pop("UVMS_MJ_PLUGIN")
+        os.environ.pop("UVMS_MJ_COMPILED")
         os.environ["CC"] = "/nonexistent/cc"
         os.environ["UVMS_MJ_CACHE"] = os.environ["EMPTY_CACHE"]
         try:
@@ -129,11 +129,11 @@ def test_plugin_off_and_no_compiler_fallback_in_subprocess(tmp_path):
             out["cc_error"] = str(exc)
         print(json.dumps(out))
     """)
-    env = dict(os.environ, UVMS_MJ_PLUGIN="off", EMPTY_CACHE=str(tmp_path))
+    env = dict(os.environ, UVMS_MJ_COMPILED="off", EMPTY_CACHE=str(tmp_path))
     res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120)
     assert res.returncode == 0, res.stderr
     out = json.loads(res.stdout.strip().splitlines()[-1])
-    assert out["ok"] is False and "UVMS_MJ_PLUGIN=off" in out["reason"]
+    assert out["ok"] is False and "UVMS_MJ_COMPILED=off" in out["reason"]
     assert "/nonexistent/cc" in out["cc_error"] and "\n" not in out["cc_error"]
 
 

@@ -97,9 +97,9 @@ def test_wls_saturation_falls_back_to_the_allocator():
 
 @pytest.fixture
 def kernel_mode(monkeypatch):
-    """Set UVMS_MJ_KERNEL and load afresh (the process's loaded kernel is restored after)."""
+    """Set UVMS_MJ_COMPILED and load afresh (the process's loaded kernel is restored after)."""
     def load(mode: str):
-        monkeypatch.setenv(kernel.ENV_KERNEL, mode)
+        monkeypatch.setenv("UVMS_MJ_COMPILED", mode)
         monkeypatch.setattr(kernel, "_LOADER", kernel._LOADER.fresh())
         return kernel.library()
 
@@ -107,18 +107,20 @@ def kernel_mode(monkeypatch):
 
 
 def test_kernel_off_runs_the_python_code(kernel_mode):
-    """UVMS_MJ_KERNEL=off: every RAC on its Python code, and the reason is said."""
+    """UVMS_MJ_COMPILED=off: every RAC on its Python code, and the reason is said."""
     assert kernel_mode("off") is None
-    assert "UVMS_MJ_KERNEL=off" in kernel.unavailable_reason()
+    assert "UVMS_MJ_COMPILED=off" in kernel.unavailable_reason()
     sc = load_scenario(SCEN / "paper.yaml", ["duration=1"])
     plant, ctrl = build(sc)
     res = run_closed_loop(plant, ctrl, sc.duration, T=ctrl.T)
     assert res.status == "ok" and ctrl._ws is None
 
 
-def test_bad_kernel_mode_is_named(kernel_mode):
-    assert kernel_mode("fast") is None
-    assert "UVMS_MJ_KERNEL='fast' is not one of auto, off" in kernel.unavailable_reason()
+def test_bad_compiled_mode_is_named(kernel_mode):
+    from uvms_mj.physics.build import CompiledModeError
+
+    with pytest.raises(CompiledModeError, match="UVMS_MJ_COMPILED='fast' is not one of auto, on, off"):
+        kernel_mode("fast")
 
 
 # ----------------------------------------------------------------------------- Eq. 12 handler

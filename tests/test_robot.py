@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 import yaml
 
-import uvms_mj  # noqa: F401  (registers the plugins)
+import uvms_mj  # noqa: F401  (the plugins: registered once by conftest.py)
 from uvms_mj.control import create
 from uvms_mj.sim.experiment import metrics
 from uvms_mj.sim.loop import SensorModel, run_closed_loop

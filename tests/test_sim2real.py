@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from click.testing import CliRunner
 
-import uvms_mj  # noqa: F401  (registers the plugins)
+import uvms_mj  # noqa: F401  (the plugins: registered once by conftest.py)
 from uvms_mj.analysis import sim2real as s2r
 from uvms_mj.cli.main import main
 from uvms_mj.analysis.identify import identify, nominal_values, overrides_for, write_overrides

@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import uvms_mj  # noqa: F401  (registers the plugins)
+import uvms_mj  # noqa: F401  (the plugins: registered once by conftest.py)
 from uvms_mj.physics import load_model
 from uvms_mj.analysis.trials import JOINT_NAMES, load_trials, lowpass, roll_pitch_yaw
 

@@ -7,53 +7,59 @@ underwater robot with 2 link manipulator": a floating base with 3 thrusters carr
     >>> from uvms_mj import Plant
     >>> plant = Plant()          # default robot, all hydrodynamics on
     >>> plant.step(120)          # 1 s at the default 1/120 s step (RK4)
+
+Importing the package only defines names: the public ones below are imported on first access.
+Nothing is compiled or registered, no environment variable is set and no signal handler is
+installed at import. The uvms MuJoCo plugins are built (C compiler, cached) and registered with
+MuJoCo when the first model that uses them is loaded (:func:`uvms_mj.physics.build.register_plugins`,
+which every loader calls); the OpenGL backend is chosen when rendering starts
+(:mod:`uvms_mj.analysis.render_gl`); the command line installs its Ctrl-C / SIGTERM handling when
+it runs.
+
+One switch, ``UVMS_MJ_COMPILED=auto|on|off`` (read when first needed,
+:func:`uvms_mj.physics.build.compiled_mode`), chooses between the compiled paths (the plugins, the
+RAC kernel, the plant's compiled sample, the planar nominal model's C code) and their Python/numpy
+references: ``auto`` (default) compiled where a C compiler is available, else Python with one
+warning; ``on`` compiled or a clear error; ``off`` Python everywhere.
 """
 
-import os as _os
-import sys as _sys
+from __future__ import annotations
 
-if _sys.argv and _os.path.basename(_sys.argv[0]) == "uvms-mj":
-    # The command line: Ctrl-C exits 130 at once, quietly (no KeyboardInterrupt traceback, and
-    # none swallowed by an import lock's callback); runs and sweeps install their own handler
-    # (recorder.handle_sigterm) that closes the log first.
-    import signal as _signal
+from typing import Any
 
-    _signal.signal(_signal.SIGINT, lambda *_: (_sys.stderr.write("interrupted\n"), _os._exit(130)))
+#: Public name -> the module that defines it (imported on first access, see __getattr__).
+_EXPORTS = {
+    "ArmGeometry": "uvms_mj.planar.kinematics",
+    "DivergenceError": "uvms_mj.plant.plant",
+    "Energy": "uvms_mj.plant.plant",
+    "HydroModel": "uvms_mj.planar.hydro",
+    "HydroTerms": "uvms_mj.planar.hydro",
+    "ParameterError": "uvms_mj.plant.params",
+    "Plant": "uvms_mj.plant.plant",
+    "RobotParams": "uvms_mj.plant.params",
+    "default_model_path": "uvms_mj.plant.plant",
+    "models_dir": "uvms_mj.plant.plant",
+    "read_params": "uvms_mj.plant.params",
+    "strip_integrals": "uvms_mj.planar.hydro",
+}
 
-# Without a display and without a user choice, pick a headless OpenGL backend (MUJOCO_GL)
-# before anything imports mujoco; with a display, or MUJOCO_GL set, nothing changes (render.py).
-from uvms_mj.analysis.render import configure_gl as _configure_gl
-
-_configure_gl()
-
-import warnings as _warnings
-
-from uvms_mj.physics import build as _build
-
-# Register the uvms MuJoCo plugins (hydrodynamics, thrusters) with MuJoCo: after this, plain
-# MuJoCo loads and simulates any model file that uses them. Without a C compiler: one line, and
-# uvms_mj's own loaders fall back to the numpy reference (uvms_mj.physics.python_backend).
-if not _build.register_plugins() and _build._mode() != "off":
-    _warnings.warn(f"uvms_mj: the C plugins are unavailable ({_build.unavailable_reason()}); "
-                   "using the numpy reference hydrodynamics (slower)", RuntimeWarning, stacklevel=2)
-
-from uvms_mj.planar.kinematics import ArmGeometry
-from uvms_mj.planar.hydro import HydroModel, HydroTerms, strip_integrals
-from uvms_mj.plant.params import ParameterError, RobotParams, read_params
-from uvms_mj.plant.plant import DivergenceError, Energy, Plant, default_model_path, models_dir
-
-__all__ = [
-    "ArmGeometry",
-    "DivergenceError",
-    "Energy",
-    "HydroModel",
-    "HydroTerms",
-    "ParameterError",
-    "Plant",
-    "RobotParams",
-    "default_model_path",
-    "models_dir",
-    "read_params",
-    "strip_integrals",
-]
+__all__ = sorted(_EXPORTS)
 __version__ = "0.1.0"
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module 'uvms_mj' has no attribute {name!r}")
+    import importlib
+
+    from uvms_mj.analysis.render_gl import guard_mujoco_import
+
+    guard_mujoco_import()  # a MUJOCO_GL that would break `import mujoco`: simulate without rendering
+    value = getattr(importlib.import_module(module), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted([*globals(), *_EXPORTS])

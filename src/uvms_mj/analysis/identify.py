@@ -161,7 +161,9 @@ _WORKER: dict = {}
 
 def _init_worker(trials, model, cfg, keep_sim=False):
     _WORKER.update(trials={t.name: t for t in trials}, model=model, cfg=cfg, keep_sim=keep_sim)
-    import uvms_mj  # noqa: F401  (registers the plugins in a spawned worker)
+    from uvms_mj.physics import build
+
+    build.register_plugins()  # once per worker process (build_model's loader would do it on first use)
 
 
 def _sim_job(args):

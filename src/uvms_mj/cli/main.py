@@ -20,9 +20,24 @@ disk; the message names the file); 130 interrupted (Ctrl-C or SIGTERM; the log i
 
 from __future__ import annotations
 
-import click
+import os
+import signal
+import sys
 
-from uvms_mj import __version__
+
+def _exit_130(*_) -> None:
+    """SIGINT: exit 130 at once, quietly (no KeyboardInterrupt traceback, none swallowed by an
+    import lock's callback)."""
+    sys.stderr.write("interrupted\n")
+    os._exit(130)
+
+
+if sys.argv and os.path.basename(sys.argv[0]) == "uvms-mj":  # only the installed command's own process,
+    signal.signal(signal.SIGINT, _exit_130)  # starting up: a Ctrl-C during its imports (never an importer)
+
+import click  # noqa: E402
+
+from uvms_mj import __version__  # noqa: E402
 # The group and its options live here; each command in the module of its kind; what they share in
 # cli.common (re-exported here: the exit codes, metrics_table, the packaged scenarios).
 from uvms_mj.cli.common import (EXIT_DIVERGED, EXIT_INTERRUPTED, EXIT_IO, EXIT_RENDER,  # noqa: F401
@@ -35,10 +50,21 @@ from uvms_mj.cli.study import sweep
 
 
 class _Group(click.Group):
-    """Ctrl-C anywhere exits with 130, not click's "Aborted!" with 1. (The installed command
-    gets a SIGINT handler that exits 130 at once from its first import on, see
-    uvms_mj/__init__.py; runs and sweeps replace it with :func:`uvms_mj.io.recorder.handle_sigterm`,
-    which closes the log first.)"""
+    """Ctrl-C anywhere exits with 130, not click's "Aborted!" with 1: while the command runs a
+    SIGINT handler exits 130 at once, quietly (:func:`_exit_130`, restored when it returns; the
+    installed command's process has it from its start); runs and sweeps replace it with
+    :func:`uvms_mj.io.interrupts.handle_sigterm`, which closes the log first. A bad
+    ``UVMS_MJ_COMPILED`` (or a former switch set) is one line and exit 2."""
+
+    def main(self, *args, **kwargs):  # noqa: ANN002, ANN003
+        try:
+            old = signal.signal(signal.SIGINT, _exit_130)
+        except ValueError:  # not the main thread: signals are not ours to handle
+            return super().main(*args, **kwargs)
+        try:
+            return super().main(*args, **kwargs)
+        finally:
+            signal.signal(signal.SIGINT, old)
 
     def make_context(self, *args, **kwargs):  # noqa: ANN002, ANN003
         try:
@@ -47,6 +73,13 @@ class _Group(click.Group):
             _interrupted()
 
     def invoke(self, ctx):  # noqa: ANN001
+        from uvms_mj.physics.build import CompiledModeError, compiled_mode
+
+        try:
+            compiled_mode()
+        except CompiledModeError as exc:
+            click.echo(f"error: {exc}", err=True)
+            sys.exit(2)
         try:
             return super().invoke(ctx)
         except KeyboardInterrupt:

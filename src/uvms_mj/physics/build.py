@@ -11,8 +11,21 @@ renamed into place, so parallel processes are safe (they may both compile; each 
 atomic and the result is the same).
 
 :func:`register_plugins` loads the library into MuJoCo (``mujoco.mj_loadPluginLibrary``) once
-per process. ``UVMS_MJ_PLUGIN=off`` (default ``auto``) never builds nor loads it: for testing the
-pure-Python fallback.
+per process; every loader of a model that uses the plugins calls it (:mod:`uvms_mj.physics.model`,
+the plant, the renderer's scene, the sim2real workers), never ``import uvms_mj``.
+
+One switch chooses between the compiled paths (these plugins, the RAC kernel, the plant's
+compiled sample, the planar nominal model's C code) and their Python/numpy references:
+``UVMS_MJ_COMPILED`` (:func:`compiled_mode`, read when first needed):
+
+* ``auto`` (default): compiled where a C compiler is available; otherwise the Python paths, with
+  one ``RuntimeWarning`` per process saying why;
+* ``on``: compiled, or a :class:`PluginUnavailableError` saying why not;
+* ``off``: the Python paths everywhere, nothing compiled.
+
+Explicit per-object choices (``Plant(backend=...)``, ``compile_spec(native=...)``) override it.
+The former variables ``UVMS_MJ_PLUGIN``, ``UVMS_MJ_BACKEND`` and ``UVMS_MJ_KERNEL`` are refused
+with a one-line :class:`CompiledModeError` naming ``UVMS_MJ_COMPILED``.
 """
 
 from __future__ import annotations
@@ -26,16 +39,21 @@ import sys
 import sysconfig
 import tempfile
 import threading
+import warnings
 from pathlib import Path
 
 import mujoco
 
 __all__ = [
+    "COMPILED_MODES",
+    "CompiledModeError",
     "ENV_CACHE",
-    "ENV_PLUGIN",
+    "ENV_COMPILED",
+    "LEGACY_ENV",
     "PluginUnavailableError",
     "cache_dir",
     "compile_library",
+    "compiled_mode",
     "library_path",
     "register_plugins",
     "sources",
@@ -43,14 +61,57 @@ __all__ = [
 ]
 
 ENV_CACHE = "UVMS_MJ_CACHE"
-ENV_PLUGIN = "UVMS_MJ_PLUGIN"
-PLUGIN_MODES = ("auto", "off")
+#: The one switch between the compiled and the Python paths (module docstring).
+ENV_COMPILED = "UVMS_MJ_COMPILED"
+COMPILED_MODES = ("auto", "on", "off")
+#: Former per-path switches, replaced by UVMS_MJ_COMPILED: refused when set.
+LEGACY_ENV = ("UVMS_MJ_PLUGIN", "UVMS_MJ_BACKEND", "UVMS_MJ_KERNEL")
 PLUGIN_DIR = Path(__file__).resolve().parent / "plugin"
 CFLAGS = ("-O2", "-shared", "-fPIC", "-ffp-contract=off")  # no FMA contraction: reproducible maths
 
 
 class PluginUnavailableError(RuntimeError):
     """The plugin library cannot be built or loaded (the message is a one-line reason)."""
+
+
+class CompiledModeError(ValueError):
+    """``UVMS_MJ_COMPILED`` has a bad value, or a former switch is set (a one-line message)."""
+
+
+def compiled_mode() -> str:
+    """``$UVMS_MJ_COMPILED`` lower-case: "auto" (unset or empty), "on" or "off".
+
+    Raises:
+        CompiledModeError: a value not in :data:`COMPILED_MODES`, or one of :data:`LEGACY_ENV` set.
+    """
+    legacy = [f"{k}={os.environ[k]}" for k in LEGACY_ENV if k in os.environ]
+    if legacy:
+        raise CompiledModeError(f"{', '.join(legacy)} is no longer read: unset it and use {ENV_COMPILED}="
+                                f"{'|'.join(COMPILED_MODES)} (off: the Python paths everywhere)")
+    raw = os.environ.get(ENV_COMPILED, "")
+    mode = raw.strip().lower() or "auto"
+    if mode not in COMPILED_MODES:
+        raise CompiledModeError(f"{ENV_COMPILED}={raw!r} is not one of {', '.join(COMPILED_MODES)}")
+    return mode
+
+
+_warned = False
+
+
+def fallback(what: str, reason: str) -> None:
+    """A compiled path is unavailable: under ``auto`` warn (once per process, whichever path
+    comes first) and let the caller take the Python path; under ``on`` raise.
+
+    Raises:
+        PluginUnavailableError: ``UVMS_MJ_COMPILED=on``.
+    """
+    global _warned
+    if compiled_mode() == "on":
+        raise PluginUnavailableError(f"{ENV_COMPILED}=on but {what} cannot be used: {reason}")
+    if not _warned:
+        _warned = True
+        warnings.warn(f"uvms_mj: {what} unavailable ({reason}); using the Python paths (slower; "
+                      f"{ENV_COMPILED}=off says so and silences this)", RuntimeWarning, stacklevel=3)
 
 
 def sources() -> list[Path]:
@@ -165,70 +226,69 @@ _reason: str | None = None
 _path: Path | None = None
 
 
-def _mode() -> str:
-    return (os.environ.get(ENV_PLUGIN, "").strip().lower() or "auto")
-
-
 def register_plugins() -> bool:
-    """Build (if needed) and load the plugin library into MuJoCo, once per process.
+    """Build (if needed) and load the plugin library into MuJoCo, once per process: the one
+    idempotent, thread-safe call every loader of a uvms model makes before parsing it.
 
     Returns True when ``uvms.water``, ``uvms.hydro`` and ``uvms.thruster`` are registered; False
-    (and :func:`unavailable_reason` says why) when it cannot build or load, or when
-    ``UVMS_MJ_PLUGIN=off``. Idempotent and thread-safe; the outcome is cached for the process.
+    (and :func:`unavailable_reason` says why) with ``UVMS_MJ_COMPILED=off``, or under ``auto``
+    when it cannot build or load (one RuntimeWarning per process). The outcome is cached.
+
+    Raises:
+        CompiledModeError: a bad ``UVMS_MJ_COMPILED``, or a former switch set.
+        PluginUnavailableError: ``UVMS_MJ_COMPILED=on`` and the library cannot be built or loaded.
     """
     global _registered, _reason, _path
+    mode = compiled_mode()
     with _lock:
-        if _registered is not None:
-            return _registered
-        mode = _mode()
-        if mode not in PLUGIN_MODES:
-            _registered, _reason = False, f"{ENV_PLUGIN}={os.environ.get(ENV_PLUGIN)!r} is not one of {', '.join(PLUGIN_MODES)}"
-            return False
-        if mode == "off":
-            _registered, _reason = False, f"disabled by {ENV_PLUGIN}=off"
-            return False
+        if _registered is None:
+            _registered, _reason, _path = _register(mode)
+        ok, reason = _registered, _reason
+    if not ok and mode != "off":
+        fallback("the uvms C plugins", reason or "")
+    return ok
+
+
+def _register(mode: str) -> tuple[bool, str | None, Path | None]:
+    if mode == "off":
+        return False, f"disabled by {ENV_COMPILED}=off", None
+    try:
+        path = library_path()
         try:
-            path = library_path()
-            try:
-                mujoco.mj_loadPluginLibrary(str(path))
-            except Exception:  # a damaged cache file: rebuild once
-                path = library_path(force=True)
-                mujoco.mj_loadPluginLibrary(str(path))
-        except PluginUnavailableError as exc:
-            _registered, _reason = False, str(exc)
-            return False
-        except Exception as exc:  # loading failed twice
-            _registered, _reason = False, f"cannot load the uvms plugin library: {exc}".replace("\n", " ")
-            return False
-        _registered, _reason, _path = True, None, path
-        return True
+            mujoco.mj_loadPluginLibrary(str(path))
+        except Exception:  # a damaged cache file: rebuild once
+            path = library_path(force=True)
+            mujoco.mj_loadPluginLibrary(str(path))
+    except PluginUnavailableError as exc:
+        return False, str(exc), None
+    except Exception as exc:  # loading failed twice
+        return False, f"cannot load the uvms plugin library: {exc}".replace("\n", " "), None
+    return True, None, path
 
 
 # --------------------------------------------------------------------------- compiled fast paths
 
-#: The switch of the compiled fast paths that are not MuJoCo plugins (the RAC kernel,
-#: :mod:`uvms_mj.control.kernel`; the plant's sample, :mod:`uvms_mj.physics.plant_io`):
-#: ``auto`` (default) builds and uses them, ``off`` keeps their Python code.
-ENV_KERNEL = "UVMS_MJ_KERNEL"
-KERNEL_MODES = ("auto", "off")
-
-
-def kernel_mode() -> str:
-    """``$UVMS_MJ_KERNEL``, lower-case (default "auto")."""
-    return os.environ.get(ENV_KERNEL, "").strip().lower() or "auto"
-
-
 def load_compiled(stem: str, srcs: list[Path], what: str):
     """Compile (into the cache, if needed) and load with ctypes one of the compiled fast paths:
-    (the ``ctypes.CDLL``, None) or (None, the one-line reason: ``UVMS_MJ_KERNEL=off`` or a bad
-    value, no compiler, a failed build). A damaged cache file is rebuilt once."""
+    (the ``ctypes.CDLL``, None) or (None, the one-line reason: ``UVMS_MJ_COMPILED=off``, no
+    compiler, a failed build; under ``auto`` also one warning per process, see :func:`fallback`).
+    A damaged cache file is rebuilt once.
+
+    Raises:
+        CompiledModeError: a bad ``UVMS_MJ_COMPILED``, or a former switch set.
+        PluginUnavailableError: ``UVMS_MJ_COMPILED=on`` and it cannot be built or loaded.
+    """
+    if compiled_mode() == "off":
+        return None, f"disabled by {ENV_COMPILED}=off"
+    lib, reason = _load_cdll(stem, srcs, what)
+    if lib is None:
+        fallback(what, reason)
+    return lib, reason
+
+
+def _load_cdll(stem: str, srcs: list[Path], what: str):
     import ctypes
 
-    mode = kernel_mode()
-    if mode not in KERNEL_MODES:
-        return None, f"{ENV_KERNEL}={os.environ.get(ENV_KERNEL)!r} is not one of {', '.join(KERNEL_MODES)}"
-    if mode == "off":
-        return None, f"disabled by {ENV_KERNEL}=off"
     try:
         return ctypes.CDLL(str(compile_library(stem, srcs))), None
     except PluginUnavailableError as exc:
@@ -255,8 +315,8 @@ class CompiledOnce:
     def get(self):
         with self._lock:
             if not self._tried:
+                lib, self.reason = load_compiled(self.stem, self.srcs, self.what)  # may raise ("on")
                 self._tried = True
-                lib, self.reason = load_compiled(self.stem, self.srcs, self.what)
                 self.value = self.configure(lib) if lib is not None else None
             return self.value
 

@@ -2,8 +2,9 @@
 
 A model file declares its water and per-body hydrodynamics through the ``uvms.water``,
 ``uvms.hydro`` and ``uvms.thruster`` plugins (``docs/hydrodynamics.md``). With the compiled plugin
-library registered (:func:`uvms_mj.physics.build.register_plugins`, done by ``import uvms_mj``),
-plain MuJoCo loads such a file and simulates it in water. Where the library cannot be built (no
+library registered (:func:`uvms_mj.physics.build.register_plugins`, which :func:`load_spec` calls
+on first use, as every loader of such a file must; ``import uvms_mj`` does not), plain MuJoCo loads
+such a file and simulates it in water. Where the library cannot be built (no
 C compiler), :func:`compile_spec` strips the uvms plugins from a copy of the spec, compiles the
 rest and remembers the parsed parameters, and :mod:`uvms_mj.physics.python_backend` applies
 the numpy reference implementation through ``mjcb_passive``.
@@ -56,7 +57,8 @@ _INFO: "weakref.WeakKeyDictionary[mujoco.MjModel, HydroInfo]" = weakref.WeakKeyD
 
 
 def plugins_available() -> bool:
-    """Whether the C plugins are registered in this process (builds them on first call)."""
+    """Whether the C plugins are registered in this process: builds and registers them on first
+    call (:func:`uvms_mj.physics.build.register_plugins`, idempotent; ``UVMS_MJ_COMPILED``)."""
     return build.register_plugins()
 
 
@@ -74,8 +76,9 @@ def load_spec(path: str | Path) -> mujoco.MjSpec:
     p = Path(path)
     if not p.is_file():
         raise ModelError(f"model file {str(p)!r} does not exist")
+    native = plugins_available()  # builds and registers them on first use (UVMS_MJ_COMPILED)
     try:
-        if plugins_available():
+        if native:
             return mujoco.MjSpec.from_file(str(p))
         xml, water, bodies = _strip_xml(p)
         spec = mujoco.MjSpec.from_string(xml)

@@ -2,7 +2,7 @@
 
 :meth:`uvms_mj.plant.plant.Plant.step_observe` (n steps, the divergence checks, the new state) runs
 through :func:`library` when it can: the same steps and numbers as its Python code (the
-reference, used with ``UVMS_MJ_KERNEL=off``, without a C compiler or on the Python hydrodynamics
+reference, used with ``UVMS_MJ_COMPILED=off``, without a C compiler or on the Python hydrodynamics
 backend), in one call instead of a dozen numpy and MuJoCo calls. Built and loaded like the RAC
 kernel (:mod:`uvms_mj.control.kernel`), by :class:`uvms_mj.physics.build.CompiledOnce`.
 """

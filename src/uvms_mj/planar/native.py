@@ -6,14 +6,13 @@ same order of floating-point operations as the Python closed form and matches it
 
 The library is compiled on first use by :func:`uvms_mj.physics.build.compile_library` (the
 system C compiler, the same cache folder and atomic rename as the plugins). With
-``$UVMS_MJ_BACKEND=python``, or where it cannot be built, the nominal model runs the Python
-closed form.
+``UVMS_MJ_COMPILED=off`` (:func:`uvms_mj.physics.build.compiled_mode`), or where it cannot be
+built (under ``auto``), the nominal model runs the Python closed form.
 """
 
 from __future__ import annotations
 
 import ctypes
-import os
 import threading
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -24,7 +23,6 @@ if TYPE_CHECKING:
     from uvms_mj.planar.hydro import HydroModel
 
 BACKENDS = ("auto", "python", "native")
-ENV_BACKEND = "UVMS_MJ_BACKEND"
 SOURCE = Path(__file__).resolve().parent / "_native" / "hydro.c"
 
 # Must match hydro.c.
@@ -155,9 +153,10 @@ def unavailable_reason() -> str | None:
     return _error
 
 
-def backend_from_env() -> str:
-    """The backend requested by $UVMS_MJ_BACKEND (default "auto"), validated."""
-    value = os.environ.get(ENV_BACKEND, "").strip().lower() or "auto"
-    if value not in BACKENDS:
-        raise ValueError(f"{ENV_BACKEND}={os.environ.get(ENV_BACKEND)!r}; allowed: {', '.join(BACKENDS)}")
-    return value
+def default_backend() -> str:
+    """The hydrodynamics backend that ``UVMS_MJ_COMPILED`` implies when none is asked for:
+    "auto" (auto), "native" (on) or "python" (off).
+
+    Raises:
+        uvms_mj.physics.build.CompiledModeError: a bad value, or a former switch set."""
+    return {"auto": "auto", "on": "native", "off": "python"}[_build.compiled_mode()]

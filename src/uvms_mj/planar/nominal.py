@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 
+from uvms_mj.physics import build as _build
 from uvms_mj.planar import native as _native
 from uvms_mj.planar.hydro import HydroModel, HydroTerms
 from uvms_mj.planar.kinematics import ArmGeometry
@@ -69,17 +70,16 @@ def rigid_as_hydro(params: RobotParams) -> RobotParams:
 
 class _Evaluator:
     """HydroModel.evaluate on preallocated buffers: the native C code when it is available (and
-    not disabled by UVMS_MJ_BACKEND=python), else the Python reference. Returns numpy arrays:
+    not disabled by UVMS_MJ_COMPILED=off), else the Python reference. Returns numpy arrays:
     the 5x5 matrix and the generalized force."""
 
     def __init__(self, hydro: HydroModel) -> None:
         self.hydro = hydro
         self.lib = None
-        try:
-            if _native.backend_from_env() != "python":
-                self.lib = _native.load()
-        except ValueError:
-            self.lib = None
+        if _native.default_backend() != "python":  # UVMS_MJ_COMPILED (physics.build.compiled_mode)
+            self.lib = _native.load()
+            if self.lib is None:
+                _build.fallback("the planar nominal model's C code", _native.unavailable_reason() or "")
         if self.lib is not None:
             self.params = _native.make_params(hydro)
             self.buf = {k: np.zeros(n) for k, n in (("q", 5), ("qd", 5), ("w", 2), ("g", 2), ("m", 15), ("f", 5))}

@@ -13,7 +13,7 @@ model) include them with every integrator (Euler, implicit, RK4):
   ``d.qfrc_passive``.
 
 Two backends compute the same hydrodynamics (``Plant(backend=...)``, default from
-``$UVMS_MJ_BACKEND``, else "auto"): "native", the C plugins compiled into the model, and
+``$UVMS_MJ_COMPILED``: "auto", "native" for ``on``, "python" for ``off``): "native", the C plugins compiled into the model, and
 "python", the numpy reference (:mod:`uvms_mj.physics.reference`) served through
 ``mjcb_passive`` (the model's plugins compiled with every term off, or stripped where they
 cannot be built); "auto" takes native when the plugin library can be built.
@@ -49,7 +49,7 @@ import mujoco
 import numpy as np
 
 from uvms_mj.planar.hydro import HydroTerms
-from uvms_mj.planar.native import BACKENDS, backend_from_env
+from uvms_mj.planar.native import BACKENDS, default_backend
 from uvms_mj.plant import params as _params
 from uvms_mj.plant.files import default_model_path, models_dir, robot_path  # noqa: F401  (re-exported)
 from uvms_mj.plant.layout import InitialState, Layout
@@ -78,10 +78,7 @@ _RESET_TO_INITIAL = object()  # Plant.reset's default: the plant's initial state
 def _resolve_backend(requested: str | None, terms: HydroTerms) -> bool:
     """Whether to use the native (C plugin) backend for the requested one."""
     if requested is None:
-        try:
-            requested = backend_from_env()
-        except ValueError as exc:
-            raise ParameterError(str(exc)) from None
+        requested = default_backend()  # UVMS_MJ_COMPILED; a bad value raises CompiledModeError
     if requested not in BACKENDS:
         raise ParameterError(f"backend = {requested!r}; allowed: {', '.join(BACKENDS)}")
     if requested == "python" or terms.added_mass == "lagged":  # lagged exists only in Python
@@ -214,7 +211,8 @@ class Plant(Stepping):
         max_speed: runaway threshold on sum |q_dot_i| (m/s and rad/s together).
         backend: "native" (the C plugins, built on first use), "python" (the numpy reference
             through ``mjcb_passive``) or "auto" (native if it can be built, else python);
-            default: ``$UVMS_MJ_BACKEND``, else "auto". :attr:`backend` tells which one is in use.
+            default: from ``$UVMS_MJ_COMPILED`` (auto, on: native, off: python).
+            ``added_mass="lagged"`` always runs in Python. :attr:`backend` tells which one is in use.
         payload: a payload picked up during the run (:class:`~uvms_mj.plant.robot.Payload`).
         failures: thrusters failing during the run (:class:`ThrusterFailure`).
 

@@ -228,6 +228,20 @@ class Physics(dm_mujoco.Physics):
         new.legacy_step = self.legacy_step
         return new
 
+    def _make_rendering_contexts(self) -> None:
+        """dm_control's contexts, with the OpenGL backend chosen now that rendering starts: on
+        Linux without a display and ``MUJOCO_GL`` unset, EGL (else OSMesa) instead of the GLFW
+        default dm_control took (:func:`uvms_mj.analysis.render_gl.dm_control_context_class`)."""
+        from dm_control import _render
+
+        from uvms_mj.analysis.render_gl import dm_control_context_class
+
+        default, _render.Renderer = _render.Renderer, dm_control_context_class()
+        try:
+            super()._make_rendering_contexts()
+        finally:
+            _render.Renderer = default
+
     def __getstate__(self):  # noqa: D105
         raise TypeError("a uvms_mj Physics cannot be pickled (it lives on its plant, whose hydrodynamics it shares)")
 

@@ -20,8 +20,9 @@ The end of an episode at the time limit is ``truncated``; a divergence is ``term
 
 Keyword arguments of ``gym.make`` go to :func:`uvms_mj.rl.env.load` (``scenario``, ``time_limit``,
 ``random``, ``reward_weights``, ``torque_limit``...), except ``render_mode`` ("rgb_array":
-dm_control's off-screen render of the scene's first camera; headless, import uvms_mj before
-mujoco or set MUJOCO_GL=egl yourself, since dm_control uses the backend mujoco was imported with).
+dm_control's off-screen render of the scene's first camera; on Linux without a display and with
+``MUJOCO_GL`` unset, the first render creates an EGL, else OSMesa, context instead of dm_control's
+GLFW default: :meth:`uvms_mj.rl.env.Physics._make_rendering_contexts`).
 """
 
 from __future__ import annotations

@@ -14,7 +14,7 @@ exactly what ``PaperExperiment().run()`` runs. Units SI, world frame X horizonta
     physics:
       timestep: 0.008333333333333333  # plant step [s] (the model's 1/120 s)
       integrator: rk4           # euler | rk4 | implicit | implicitfast (the model's rk4)
-      backend: auto             # auto ($UVMS_MJ_BACKEND if set, else native if it builds) | native | python
+      backend: auto             # auto (native if it builds; $UVMS_MJ_COMPILED=off: python) | native | python
     plant:                      # the truth
       model_mismatch: true      # experiment.truth_overrides() (potential-flow added mass, +1 % base
                                 #   volume, offset centre of buoyancy) and MuJoCo ellipsoid drag
@@ -313,7 +313,7 @@ class Physics(_Section):
     integrator: Literal["euler", "rk4", "implicit", "implicitfast"] = Field(
         default_factory=_default("integrator"), description="MuJoCo integrator (model: rk4)")
     backend: Literal["auto", "native", "python"] = Field(
-        "auto", description="hydrodynamics backend; auto: $UVMS_MJ_BACKEND if set, else native if it builds")
+        "auto", description="hydrodynamics backend; auto: native if it builds ($UVMS_MJ_COMPILED=off: python)")
 
 
 class Hydro(_Section):

@@ -7,8 +7,9 @@ cost dominates. The C file is compiled with the plugins' machinery
 (:func:`uvms_mj.physics.build.compile_library`: the system C compiler, the mujoco wheel's headers
 and library, a cache keyed on every input) the first time it is needed.
 
-``UVMS_MJ_KERNEL=off`` (default ``auto``) keeps every RAC on its Python code; without a C
-compiler, or on the Python hydrodynamics backend (the nominal model's forces then come from a
+``UVMS_MJ_COMPILED=off`` (default ``auto``, :func:`uvms_mj.physics.build.compiled_mode`) keeps
+every RAC on its Python code; without a C compiler (under ``auto``), or on the Python
+hydrodynamics backend (the nominal model's forces then come from a
 Python callback), the Python code runs too. :func:`unavailable_reason` says why not.
 """
 
@@ -21,7 +22,6 @@ import numpy as np
 
 from uvms_mj.physics import build
 
-ENV_KERNEL, KERNEL_MODES = build.ENV_KERNEL, build.KERNEL_MODES
 #: The largest dof, task, arm and thruster-row count the C code's fixed buffers take.
 MAXN = 32
 SOURCE = Path(__file__).resolve().parent / "rac_kernel.c"
