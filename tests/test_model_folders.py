@@ -19,7 +19,7 @@ import pytest
 
 import uvms_mj  # noqa: F401  (registers the uvms plugins)
 from uvms_mj.plant.plant import default_model_path, models_dir
-from uvms_mj.plant.robot import BUILTIN_ROBOTS, robot_path
+from uvms_mj.plant.files import BUILTIN_ROBOTS, robot_path
 
 ROOT = Path(__file__).resolve().parents[1]
 MODELS = ROOT / "models"

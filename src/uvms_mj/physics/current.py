@@ -23,12 +23,10 @@ import math
 from dataclasses import dataclass
 from typing import Sequence
 
+from uvms_mj.physics.config import CURRENT_MODELS
 from uvms_mj.physics.model import fmt
 
-__all__ = ["CURRENT_MODELS", "Current"]
-
-#: The current models of the ``uvms.water`` plugin.
-CURRENT_MODELS = ("constant", "gauss_markov", "profile")
+__all__ = ["Current"]
 
 
 def _vec3(name: str, v: Sequence[float] | None) -> tuple[float, float, float] | None:
