@@ -11,8 +11,11 @@ import mujoco
 import numpy as np
 import pytest
 
+from oracles.planar.rac import register_oracles
 from uvms_mj import Plant
 from uvms_mj.physics import build as _build
+
+register_oracles()  # the planar closed-form RAC as controllers rac_planar, rac_dob_planar (tests only)
 
 # The uvms plugins registered once for the suite: uvms_mj's loaders do it on first use (not
 # `import uvms_mj`), and some tests hand model files to plain MuJoCo first.

@@ -7,14 +7,14 @@ import pytest
 from scipy import signal
 
 from uvms_mj import Plant
-from uvms_mj.planar.allocation import Allocator, allocation_matrix
+from oracles.planar.allocation import Allocator, allocation_matrix
 from uvms_mj.control import ControllerError, Measurement, available, create
-from uvms_mj.control.builtin import LowPassZOH, damped_inverse
+from uvms_mj.control.digital import LowPassZOH, damped_inverse
 from uvms_mj.sim.experiment import PaperExperiment, metrics
-from uvms_mj.planar.kinematics import jacobians, task_jacobian, tip_position
+from oracles.planar.kinematics import jacobians, task_jacobian, tip_position
 from uvms_mj.sim.loop import SensorModel, run_closed_loop
-from uvms_mj.planar.nominal import NominalModel
-from uvms_mj.planar.trajectory import StraightLine
+from oracles.planar.nominal import NominalModel
+from oracles.planar.trajectory import StraightLine
 
 T = 1 / 60
 Q0 = np.r_[0.0, 0.0, -np.pi / 2, np.pi / 3, -5 * np.pi / 18]
@@ -194,7 +194,7 @@ def test_observer_converges_to_unknown_force():
         plant.data.qfrc_applied[:2] = push  # unknown to the controller
         tip0 = tip_position(nominal.geometry, plant.q)
         path = StraightLine(start=tuple(tip0), target=tuple(tip0))
-        ctrl = create(name, trajectory=path, nominal=nominal)
+        ctrl = create(name, trajectory=path)  # the nominal model: the paper robot's model file
         res = run_closed_loop(plant, ctrl, duration=60.0)
         assert res.status == "ok"
         steady = res.t > 50.0
@@ -307,7 +307,7 @@ def test_bad_target_and_name():
 
 def test_registry_and_entry_points(monkeypatch):
     assert {"rac", "rac_dob", "pd"} <= set(available())
-    ep = metadata.EntryPoint(name="third_party_pd", value="uvms_mj.control.builtin:TaskPD",
+    ep = metadata.EntryPoint(name="third_party_pd", value="uvms_mj.control.pd:TaskPD",
                              group="uvms_mj.controllers")
     real = metadata.entry_points
 

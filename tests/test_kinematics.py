@@ -4,7 +4,7 @@ import mujoco
 import numpy as np
 
 from uvms_mj import Plant
-from uvms_mj.planar.kinematics import ArmGeometry, det_b, jacobians, task_jacobian, tip_position
+from oracles.planar.kinematics import ArmGeometry, det_b, jacobians, task_jacobian, tip_position
 
 from conftest import kinematics_only, random_q
 

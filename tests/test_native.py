@@ -15,8 +15,9 @@ import sys
 import numpy as np
 import pytest
 
-import uvms_mj.planar.native as native
-from uvms_mj import HydroModel, HydroTerms, Plant, strip_integrals
+import oracles.planar.native as native
+from oracles.planar.hydro import HydroModel
+from uvms_mj import HydroTerms, Plant, strip_integrals
 from uvms_mj.physics import build
 
 from conftest import random_q, random_qd
@@ -104,8 +105,10 @@ def test_build_failures_are_reported(monkeypatch, tmp_path, cc, pattern):
 
 def test_parallel_builds_share_one_library(lib, tmp_path):
     """Four processes building into an empty cache at once: one library, no leftovers, all load."""
-    code = "import uvms_mj.planar.native as n; lib = n.NativeLib(n.build()); print(lib.path)"
-    env = {**os.environ, build.ENV_CACHE: str(tmp_path)}
+    code = "import oracles.planar.native as n; lib = n.NativeLib(n.build()); print(lib.path)"
+    tests_dir = os.path.dirname(os.path.abspath(__file__))  # the oracles package lives there
+    env = {**os.environ, build.ENV_CACHE: str(tmp_path),
+           "PYTHONPATH": os.pathsep.join(filter(None, (tests_dir, os.environ.get("PYTHONPATH"))))}
     procs = [subprocess.Popen([sys.executable, "-c", code], env=env, stdout=subprocess.PIPE, text=True)
              for _ in range(4)]
     paths = {p.communicate(timeout=300)[0].strip() for p in procs}

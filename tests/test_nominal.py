@@ -4,7 +4,7 @@ import mujoco
 import numpy as np
 
 from uvms_mj import Plant
-from uvms_mj.planar.nominal import NominalModel
+from oracles.planar.nominal import NominalModel
 
 from conftest import random_q, random_qd
 

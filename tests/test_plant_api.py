@@ -243,7 +243,7 @@ def test_extra_data(backend, native_available):
 def test_tip_position_is_current_after_steps():
     """After mj_step, MuJoCo's site_xpos lags the state (RK4: an intermediate stage); the
     accessor must give the tip of the current qpos (analytic Eq. 1, 1e-12)."""
-    from uvms_mj.planar.kinematics import ArmGeometry, tip_position
+    from oracles.planar.kinematics import ArmGeometry, tip_position
 
     plant = Plant()
     plant.set_state(joint_velocities=(1.0, -1.0))

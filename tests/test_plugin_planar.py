@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from uvms_mj import HydroTerms, Plant
-from uvms_mj.planar.hydro import HydroModel
+from oracles.planar.hydro import HydroModel
 
 from conftest import added_and_passive
 

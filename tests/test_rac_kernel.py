@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 
 from uvms_mj.control import kernel
-from uvms_mj.control.builtin import SingularHandler
+from uvms_mj.control.digital import SingularHandler
 from uvms_mj.sim.experiment import metrics
 from uvms_mj.sim.loop import run_closed_loop
 from uvms_mj.scenario.schema import build, load_scenario, sensor_model

@@ -19,7 +19,7 @@ from mcap.reader import make_reader
 
 from uvms_mj.sim.experiment import PaperExperiment, metrics
 from uvms_mj.sim.loop import RunResult, run_closed_loop
-from uvms_mj.planar.nominal import params_from_file
+from oracles.planar.nominal import params_from_file
 from uvms_mj.io.recorder import (
     SCHEMAS,
     LogData,
@@ -400,9 +400,9 @@ def run_child(script: str, path: Path) -> subprocess.Popen:
     code = textwrap.dedent("""
         import math, sys, time
         import numpy as np
-        from uvms_mj.planar.nominal import params_from_file
-        from uvms_mj.io.recorder import McapRecorder, handle_sigterm
         sys.path.insert(0, {tests!r})
+        from oracles.planar.nominal import params_from_file
+        from uvms_mj.io.recorder import McapRecorder, handle_sigterm
         from test_recorder import synthetic_row
         path = {path!r}
     """).format(tests=str(Path(__file__).parent), path=str(path)) + textwrap.dedent(script)

@@ -249,7 +249,7 @@ def test_robot_without_arm_or_tip(tmp_path) -> None:
 
 def test_paper_log_keeps_its_channels(tmp_path) -> None:
     from uvms_mj.sim.experiment import PaperExperiment
-    from uvms_mj.planar.nominal import params_from_file
+    from oracles.planar.nominal import params_from_file
 
     run = PaperExperiment(duration=0.5).run()
     path = tmp_path / "paper.mcap"
@@ -262,7 +262,7 @@ def test_paper_log_keeps_its_channels(tmp_path) -> None:
 
 def test_recorder_rejects_bad_models(tmp_path, alpha) -> None:
     plant = alpha[0]
-    from uvms_mj.planar.nominal import params_from_file
+    from oracles.planar.nominal import params_from_file
 
     with pytest.raises(ValueError, match="not both"):
         McapRecorder(tmp_path / "a.mcap", params_from_file(), model=plant.model)

@@ -14,7 +14,8 @@ import yaml
 from uvms_mj.control import available
 from uvms_mj.sim.experiment import PAPER_TIP_DISPLACEMENT, PaperExperiment, truth_overrides
 from uvms_mj.sim.loop import SensorModel
-from uvms_mj.planar.nominal import params_from_file
+from oracles.planar.nominal import params_from_file
+from uvms_mj.plant.params import read_params
 from uvms_mj.plant.plant import Plant
 from uvms_mj.scenario.schema import (
     Scenario,
@@ -136,7 +137,7 @@ def test_ideal_and_rac_match_the_experiment_too():
 def test_nominal_model_is_the_file_plus_nominal_overrides():
     sc = load_scenario(SCENARIOS / "mismatch.yaml")
     plant, ctrl = build(sc)
-    nominal, file = ctrl.nominal.params, params_from_file()
+    nominal, file = read_params(ctrl.robot.model), params_from_file()  # the controller's own MuJoCo model
     for name in ("base", "link1", "link2"):
         b, f = nominal.body(name), file.body(name)
         np.testing.assert_allclose(b.added_mass + (b.added_inertia,), 1.3 * np.array(f.added_mass + (f.added_inertia,)),
@@ -149,7 +150,7 @@ def test_nominal_model_is_the_file_plus_nominal_overrides():
     assert plant.params.body("base").volume == pytest.approx(truth["base.volume"])
     # plant overrides never leak into the nominal model
     _, ctrl = build(Scenario(plant={"overrides": {"base.volume": 0.031}}))
-    assert ctrl.nominal.params.body("base").volume == file.body("base").volume
+    assert read_params(ctrl.robot.model).body("base").volume == file.body("base").volume
 
 
 def test_sections_reach_the_plant_and_controller():
@@ -167,7 +168,7 @@ def test_sections_reach_the_plant_and_controller():
     assert plant.params.thrusters[0].tau == 0.05 and plant.params.thrusters[2].force_range == (-5.0, 10.0)
     assert plant.dead_zone is True
     assert ctrl.name == "rac" and np.all(ctrl.gamma == 0.25) and ctrl.js_high == 0.05
-    assert ctrl.trajectory.target == (0.5, -0.5) and ctrl.trajectory.cruise_speed == 0.03
+    assert ctrl.trajectory.target == (0.5, -0.5, 0.0) and ctrl.trajectory.cruise_speed == 0.03  # the plane z = 0
     assert ctrl.trajectory.accel == 0.05 and ctrl.trajectory.t_start == 0.5
 
 
@@ -310,7 +311,7 @@ def test_plugin_controllers_are_validated_by_their_own_errors(monkeypatch):
     from uvms_mj.control import ControllerError, base
 
     class Toy(base.Controller):
-        def __init__(self, trajectory, nominal=None, T=1 / 60, gain=1.0, **extra):
+        def __init__(self, trajectory, robot=None, T=1 / 60, gain=1.0, **extra):
             if not gain > 0:
                 raise ControllerError(f"gain = {gain!r} must be > 0")
             self.T, self.extra = T, extra

@@ -15,9 +15,9 @@ import mujoco
 import numpy as np
 import pytest
 
-from uvms_mj.planar.allocation import Allocator as PlanarAllocator
-from uvms_mj.planar.allocation import allocation_matrix as planar_matrix
-from uvms_mj.planar.nominal import NominalModel
+from oracles.planar.allocation import Allocator as PlanarAllocator
+from oracles.planar.allocation import allocation_matrix as planar_matrix
+from oracles.planar.nominal import NominalModel
 from uvms_mj.plant.plant import default_model_path
 from uvms_mj.physics.thrusters import (Allocator, ThrustCurve, allocation_matrix, invert_curve, thrust_commands,
                                thruster_curves)

@@ -25,7 +25,7 @@ from uvms_mj.control.trajectories import (
     min_jerk,
     write_csv,
 )
-from uvms_mj.planar.trajectory import StraightLine
+from oracles.planar.trajectory import StraightLine
 
 EPS = np.finfo(float).eps
 

@@ -29,18 +29,16 @@ from typing import Any
 
 #: Public name -> the module that defines it (imported on first access, see __getattr__).
 _EXPORTS = {
-    "ArmGeometry": "uvms_mj.planar.kinematics",
     "DivergenceError": "uvms_mj.plant.plant",
     "Energy": "uvms_mj.plant.plant",
-    "HydroModel": "uvms_mj.planar.hydro",
-    "HydroTerms": "uvms_mj.planar.hydro",
+    "HydroTerms": "uvms_mj.physics.terms",
     "ParameterError": "uvms_mj.plant.params",
     "Plant": "uvms_mj.plant.plant",
     "RobotParams": "uvms_mj.plant.params",
     "default_model_path": "uvms_mj.plant.plant",
     "models_dir": "uvms_mj.plant.plant",
     "read_params": "uvms_mj.plant.params",
-    "strip_integrals": "uvms_mj.planar.hydro",
+    "strip_integrals": "uvms_mj.physics.reference",
 }
 
 __all__ = sorted(_EXPORTS)

@@ -10,7 +10,7 @@ import click
 import numpy as np
 
 from uvms_mj.cli.common import EXIT_DIVERGED, EXIT_RENDER, metrics_table
-from uvms_mj.planar.hydro import HydroTerms
+from uvms_mj.physics.terms import HydroTerms
 from uvms_mj.plant.params import ParameterError
 from uvms_mj.plant.plant import DivergenceError, Plant
 

@@ -9,7 +9,7 @@ same keyword arguments as the built-ins)::
     my_ctrl = "my_package.module:MyController"
 
 Controllers see only :class:`Measurement` objects and their own nominal model
-(:class:`~uvms_mj.planar.nominal.NominalModel`); never MuJoCo's state or parameters.
+(:class:`~uvms_mj.control.nominal.NominalRobot`); never MuJoCo's state or parameters.
 """
 
 from __future__ import annotations
@@ -101,7 +101,7 @@ def _entry_points() -> dict[str, metadata.EntryPoint]:
 
 def available() -> list[str]:
     """Names of the built-in and installed (entry-point) controllers."""
-    from uvms_mj.control import builtin, rac, station_pid, task_priority  # noqa: F401  (registers the built-ins)
+    from uvms_mj.control import pd, rac, station_pid, task_priority  # noqa: F401  (registers the built-ins)
 
     return sorted(set(_REGISTRY) | set(_entry_points()))
 
@@ -112,7 +112,7 @@ def create(name: str, **kwargs: Any) -> Controller:
     Raises:
         ControllerError: unknown name (the message lists the registered controllers).
     """
-    from uvms_mj.control import builtin, rac, station_pid, task_priority  # noqa: F401
+    from uvms_mj.control import pd, rac, station_pid, task_priority  # noqa: F401
 
     factory = _REGISTRY.get(name)
     if factory is None:

@@ -71,6 +71,12 @@ class NominalRobot:
         self.motor_dofs = np.array([m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j)]
                                     for j in lay.motor_joints], dtype=int)
 
+    def tip_at(self, q: Sequence[float]) -> np.ndarray:
+        """The end-effector site's position at ``q``, world [m], along the layout's plane axes
+        (a planar robot's (x, y); a free vehicle's (x, y, z))."""
+        self._set(np.asarray(q, dtype=float))
+        return self.data.site_xpos[self.layout.tip_site, list(self.layout.plane_axes)].copy()
+
     def _set(self, q: np.ndarray, qd: np.ndarray | None = None) -> None:
         d = self.data
         d.qpos[:] = q

@@ -5,8 +5,8 @@ One implementation for the paper's planar robot and for any floating vehicle wit
 (:class:`uvms_mj.control.nominal.NominalRobot`: the robot FILE with nominal parameters, still
 water, never the plant), evaluated at the measured state with MuJoCo's functions: ``mj_fullM``
 and ``qfrc_bias - qfrc_passive`` for Eqs. 6, 7 and 13, ``mj_jacBody`` / ``mj_jacSite`` for the
-task Jacobian. The planar closed form (:mod:`uvms_mj.planar.nominal`, controllers ``rac_planar`` and
-``rac_dob_planar``) stays only as the test oracle: on the paper's robot both give the same run.
+task Jacobian. The planar closed form of the paper's robot (``tests/oracles/planar``: its nominal
+model, Eqs. 6-7, and the planar RAC) is the test oracle: on the paper's robot both give the same run.
 
 Task (the paper's p = (x0, pe), Eq. 1, generalised):
 
@@ -50,7 +50,7 @@ import numpy as np
 from uvms_mj.control.nominal import NominalRobot
 from uvms_mj.physics.thrusters import Allocator
 from uvms_mj.control.base import Command, Controller, ControllerError, Measurement, check_positive, register
-from uvms_mj.control.builtin import (
+from uvms_mj.control.digital import (
     PAPER_JS,
     PAPER_T,
     PAPER_TF,
@@ -126,37 +126,11 @@ def _gains(name: str, value: Any, default: np.ndarray) -> np.ndarray:
     return arr
 
 
-def nominal_robot_from_params(nominal) -> NominalRobot:
-    """The paper robot's :class:`NominalRobot` for a planar :class:`uvms_mj.planar.nominal.NominalModel`:
-    the model file with every parameter of ``nominal.params`` written back as overrides (so a
-    NominalModel built from edited parameters gives the same MuJoCo nominal model)."""
-    from uvms_mj.plant.params import apply_overrides
-    from uvms_mj.plant.plant import models_dir
+def paper_nominal_robot() -> NominalRobot:
+    """The paper robot's :class:`NominalRobot`: its model file (``models/uvms.xml``) as is."""
+    from uvms_mj.plant.files import models_dir
 
-    p = nominal.params
-    over: dict[str, Any] = {"water_density": p.rho}
-    for b in p.bodies:
-        over.update({f"{b.name}.mass": b.mass, f"{b.name}.inertia": b.inertia,
-                     f"{b.name}.added_mass": [b.added_mass[0], b.added_mass[1], b.added_inertia],
-                     f"{b.name}.drag_coef": list(b.drag_coef), f"{b.name}.volume": b.volume,
-                     f"{b.name}.cob": list(b.cob)})
-    ranges = {tuple(t.force_range) for t in p.thrusters}
-    if len(ranges) == 1:
-        over["thrusters.force_range"] = list(ranges.pop())
-    gx, gy = nominal.gravity
-
-    def edit(spec: mujoco.MjSpec) -> None:
-        apply_overrides(spec, over)
-        spec.option.gravity = [float(gx), float(gy), 0.0]
-
-    robot = NominalRobot(models_dir() / "uvms.xml", edit=edit)
-    if len(ranges) > 1:  # per-thruster ranges
-        for t in p.thrusters:
-            a = mujoco.mj_name2id(robot.model, mujoco.mjtObj.mjOBJ_ACTUATOR, t.name)
-            robot.model.actuator_forcerange[a] = t.force_range
-        lay = robot.layout
-        robot.thruster_lo, robot.thruster_hi = robot.model.actuator_forcerange[lay.thruster_ids].T.copy()
-    return robot
+    return NominalRobot(models_dir() / "uvms.xml")
 
 
 @register("rac")
@@ -166,14 +140,13 @@ class RAC(Controller):
 
     Args:
         trajectory: desired tip path: any object with ``position(t)`` (world [m]; a
-            :class:`uvms_mj.planar.trajectory.StraightLine` or any :class:`uvms_mj.control.trajectories.Trajectory`),
+            any :class:`uvms_mj.control.trajectories.Trajectory`),
             ``velocity(t)`` if it has no ``cruise_velocity()``; ``orientation(t)`` with
             ``tip_orientation``. None: hold the initial tip position. Optional
             ``positions(ts)``: ``position`` at each time of an array, the same numbers bit for bit
-            (read in blocks of ``TIP_BLOCK`` samples; StraightLine has it).
-        robot: the controller's :class:`NominalRobot` (floating robots; given by the scenario).
-        nominal: for the paper's robot, a planar :class:`uvms_mj.planar.nominal.NominalModel` whose
-            parameters make the nominal MuJoCo model (default: the model file's).
+            (read in blocks of ``TIP_BLOCK`` samples).
+        robot: the controller's :class:`NominalRobot` (given by the scenario; default the paper's
+            robot's model file, :func:`paper_nominal_robot`).
         T: sampling period [s] (paper 1/60).
         gamma, lam: Gamma, Lambda (1 or task-size numbers in (0, 1); default 0.3 base position,
             0.2 base rotation and tip: the paper's on its robot).
@@ -207,7 +180,6 @@ class RAC(Controller):
         self,
         trajectory=None,
         robot: NominalRobot | None = None,
-        nominal=None,
         T: float = PAPER_T,
         gamma=None,
         lam=None,
@@ -229,12 +201,7 @@ class RAC(Controller):
         tf_arm: float | None = None,
     ) -> None:
         if robot is None:
-            from uvms_mj.planar.nominal import NominalModel
-
-            nominal = nominal if nominal is not None else NominalModel()
-            robot = nominal_robot_from_params(nominal)
-        #: the planar parameters the nominal MuJoCo model was made from (paper robot), else None
-        self.nominal = nominal
+            robot = paper_nominal_robot()
         if not isinstance(robot, NominalRobot):
             raise ControllerError(f"robot = {robot!r} must be a NominalRobot")
         self.robot = robot
@@ -381,7 +348,7 @@ class RAC(Controller):
     def _tip_k(self, k: int) -> np.ndarray:
         """The desired tip at sample k (:meth:`_tip_d` at t = k T): read from blocks of
         ``TIP_BLOCK`` samples where the trajectory has ``positions(ts)`` (position at each time,
-        the same numbers bit for bit, e.g. :meth:`uvms_mj.planar.trajectory.StraightLine.positions`)."""
+        the same numbers bit for bit, where a trajectory offers it)."""
         blk = self._tip_blk
         if blk is not None and 0 <= k - blk[0] < len(blk[1]):
             return blk[1][k - blk[0]]

@@ -14,7 +14,7 @@ Every trajectory is a :class:`Trajectory`: world frame, SI units, and
 Kinds:
 
 * :class:`Line3D`: straight line with the trapezoidal speed profile of
-  :class:`uvms_mj.planar.trajectory.StraightLine` (same maths, in 3-D).
+  the paper's planar line (its 2-D scalar code: the test oracle ``tests/oracles/planar/trajectory.py``).
 * :class:`Waypoints`: minimum-jerk (quintic) segments, at rest at every waypoint.
 * :class:`Circle`, :class:`Lemniscate` (of Gerono), :class:`Helix`: periodic curves whose angular
   rate ramps up from 0 with a minimum-jerk profile over ``t_ramp`` (so they start at rest).
@@ -45,7 +45,6 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-from uvms_mj.planar.trajectory import trapezoid_profile
 
 __all__ = [
     "Trajectory",
@@ -63,6 +62,18 @@ __all__ = [
     "write_csv",
 ]
 
+
+
+def trapezoid_profile(cruise_speed: float, accel: float, length: float) -> tuple[float, float, float]:
+    """(peak speed v [m/s], ramp time t_r [s], cruise time t_c [s]) of a rest-to-rest move over
+    ``length`` with constant acceleration ``accel`` up to ``cruise_speed`` (triangular, with
+    v = sqrt(accel length), when the line is too short to reach it)."""
+    v, a, L = cruise_speed, accel, length
+    if v * v / a > L:  # triangular
+        v = math.sqrt(a * L)
+    t_ramp = v / a
+    t_cruise = (L - v * t_ramp) / v if v > 0 else 0.0
+    return v, t_ramp, t_cruise
 
 # --------------------------------------------------------------------------- validation helpers
 
@@ -224,7 +235,7 @@ class Trajectory(ABC):
 class Line3D(Trajectory):
     """Straight line from ``start`` to ``target`` with a trapezoidal speed profile (3-D).
 
-    The same profile as :class:`uvms_mj.planar.trajectory.StraightLine`: at rest until ``t_start``,
+    The paper's end-tip line (Section 4) in 3-D: at rest until ``t_start``,
     constant acceleration ``accel`` up to the peak speed v, cruise, constant deceleration to rest
     exactly at ``target``. With L = |target - start|::
 
@@ -308,6 +319,17 @@ class Line3D(Trajectory):
     def position(self, t: Any) -> np.ndarray:
         d = self.distance(t)[0]
         return self._start + d[..., None] * self.direction
+
+    def cruise_velocity(self) -> np.ndarray:
+        """The cruise velocity vector (world, m/s): the profile's peak speed along the line (what
+        Eq. 12 gives the base to follow)."""
+        return self.profile[0] * self.direction
+
+    def positions(self, ts: Any) -> np.ndarray:
+        """:meth:`position` at each of the times ``ts`` (shape ``(len(ts), 3)``): the same
+        element-wise operations, so the same numbers (a sampled controller reads its desired
+        points from such blocks)."""
+        return self.position(np.asarray(ts, dtype=float).ravel())
 
     def velocity(self, t: Any) -> np.ndarray:
         return self.distance(t)[1][..., None] * self.direction

@@ -1,7 +1,7 @@
 """Thruster allocation for any layout: allocation matrix, saturating allocator, thrust curves.
 
 Three pieces, independent of the paper robot (for its three planar thrusters see also
-:mod:`uvms_mj.planar.allocation`, whose "clip" / "scale" behaviour is unchanged):
+the paper's planar allocator (the test oracle ``tests/oracles/planar/allocation.py``), whose "clip" / "scale" behaviour is unchanged):
 
 * :func:`allocation_matrix` -- the 6 x n matrix B of a compiled MuJoCo model's thruster
   actuators (site transmission), wrench = B @ thrust.

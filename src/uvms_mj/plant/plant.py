@@ -48,14 +48,12 @@ from typing import Any, Mapping, Sequence
 import mujoco
 import numpy as np
 
-from uvms_mj.planar.hydro import HydroTerms
-from uvms_mj.planar.native import BACKENDS, default_backend
+from uvms_mj.physics.terms import BACKENDS, HydroTerms, default_backend
 from uvms_mj.plant import params as _params
 from uvms_mj.plant.files import default_model_path, models_dir, robot_path  # noqa: F401  (re-exported)
 from uvms_mj.plant.layout import InitialState, Layout
 from uvms_mj.plant.params import ParameterError, RobotParams, read_params
-from uvms_mj.plant.robot import Payload, factor_of, resolve_role
-from uvms_mj.plant.robot import apply_overrides as _apply_named
+from uvms_mj.plant.robot import Payload, _is_planar_spec, apply_model_overrides
 from uvms_mj.plant.stepping import (  # noqa: F401  (DivergenceError, Energy, mujoco_warnings: re-exported)
     DivergenceError,
     Energy,
@@ -120,55 +118,6 @@ def set_integration(m: mujoco.MjModel, timestep: float | None, integrator: str |
             raise ParameterError(f"integrator = {integrator!r}; allowed: {', '.join(names)}")
         m.opt.integrator = names[key]
 
-
-
-def _is_planar_spec(spec: mujoco.MjSpec) -> bool:
-    """No free joint: a planar base (the paper's parameter vocabulary applies to its overrides)."""
-    return not any(j.type == mujoco.mjtJoint.mjJNT_FREE for j in spec.joints)
-
-
-def _planar_key(key: str) -> bool:
-    """A key of the paper robot's parameter vocabulary (:data:`uvms_mj.plant.params.OVERRIDE_KEYS`)."""
-    head, _, fld = str(key).partition(".")
-    return (key == "water_density" or key.startswith("thrusters.")
-            or (head in _params.HYDRO_BODIES and fld in ("mass", "inertia", "added_mass", "drag_coef", "volume", "cob")))
-
-
-def apply_model_overrides(spec: mujoco.MjSpec, overrides: Mapping[str, Any]) -> None:
-    """Parameter overrides of any robot, in order: on a planar robot (the paper's) the keys of
-    its parameter vocabulary (:data:`uvms_mj.plant.params.OVERRIDE_KEYS`: ``base.added_mass`` =
-    [m_Ax, m_Ay, I_A], ``thrusters.tau``...) go to :func:`uvms_mj.plant.params.apply_overrides`;
-    every other key is by element name (:func:`uvms_mj.plant.robot.apply_overrides`: bodies,
-    joints, actuators, the water, the ``vehicle`` role, factors).
-
-    Raises:
-        ParameterError: as the two functions."""
-    planar = _is_planar_spec(spec)
-    for key, value in overrides.items():
-        key = resolve_role(spec, key)
-        if planar and _planar_key(key):
-            f = factor_of(value)
-            if f is not None:
-                value = (f * _planar_value(spec, key)).tolist()
-            _params.apply_overrides(spec, {key: value})
-        else:
-            _apply_named(spec, {key: value})
-
-
-def _planar_value(spec: mujoco.MjSpec, key: str) -> np.ndarray:
-    """The paper robot's own value of a parameter key (what a factor multiplies)."""
-    p = read_params(_pm.compile_spec(spec, source="model"))  # (compiling leaves the spec as it is)
-    head, _, fld = key.partition(".")
-    if key == "water_density":
-        return np.array([p.rho])
-    if head == "thrusters":
-        t = p.thrusters[0]
-        return np.atleast_1d(np.array({"tau": t.tau, "force_range": t.force_range, "dead_zone": p.dead_zone}[fld],
-                                      dtype=float))
-    b = p.body(head)
-    vals = {"mass": b.mass, "inertia": b.inertia, "added_mass": [b.added_mass[0], b.added_mass[1], b.added_inertia],
-            "drag_coef": b.drag_coef, "volume": b.volume, "cob": b.cob[:2]}
-    return np.atleast_1d(np.array(vals[fld], dtype=float))
 
 
 @dataclass(frozen=True)

@@ -25,11 +25,12 @@ from typing import Any, Mapping, Sequence
 import mujoco
 import numpy as np
 
-from uvms_mj.plant.params import ParameterError
+from uvms_mj.plant import params as _params
+from uvms_mj.plant.params import ParameterError, read_params
 from uvms_mj.physics import model as _pm
 
-__all__ = ["OVERRIDE_FIELDS", "ROLES", "Payload", "apply_overrides", "compile_robot_spec", "factor_of",
-           "resolve_role"]
+__all__ = ["OVERRIDE_FIELDS", "ROLES", "Payload", "apply_model_overrides", "apply_overrides", "compile_robot_spec",
+           "factor_of", "resolve_role"]
 
 #: Roles an override key may start with instead of an element name: the vehicle's body, every
 #: thruster (site actuator) at once.
@@ -287,6 +288,55 @@ def apply_overrides(spec: mujoco.MjSpec, overrides: Mapping[str, Any]) -> None:
             setattr(a, "forcelimited" if fld == "forcerange" else "ctrllimited", mujoco.mjtLimited.mjLIMITED_TRUE)
 
 
+def _is_planar_spec(spec: mujoco.MjSpec) -> bool:
+    """No free joint: a planar base (the paper's parameter vocabulary applies to its overrides)."""
+    return not any(j.type == mujoco.mjtJoint.mjJNT_FREE for j in spec.joints)
+
+
+def _planar_key(key: str) -> bool:
+    """A key of the paper robot's parameter vocabulary (:data:`uvms_mj.plant.params.OVERRIDE_KEYS`)."""
+    head, _, fld = str(key).partition(".")
+    return (key == "water_density" or key.startswith("thrusters.")
+            or (head in _params.HYDRO_BODIES and fld in ("mass", "inertia", "added_mass", "drag_coef", "volume", "cob")))
+
+
+def apply_model_overrides(spec: mujoco.MjSpec, overrides: Mapping[str, Any]) -> None:
+    """Parameter overrides of any robot, in order: on a planar robot (the paper's) the keys of
+    its parameter vocabulary (:data:`uvms_mj.plant.params.OVERRIDE_KEYS`: ``base.added_mass`` =
+    [m_Ax, m_Ay, I_A], ``thrusters.tau``...) go to :func:`uvms_mj.plant.params.apply_overrides`;
+    every other key is by element name (:func:`apply_overrides`: bodies,
+    joints, actuators, the water, the ``vehicle`` role, factors).
+
+    Raises:
+        ParameterError: as the two functions."""
+    planar = _is_planar_spec(spec)
+    for key, value in overrides.items():
+        key = resolve_role(spec, key)
+        if planar and _planar_key(key):
+            f = factor_of(value)
+            if f is not None:
+                value = (f * _planar_value(spec, key)).tolist()
+            _params.apply_overrides(spec, {key: value})
+        else:
+            apply_overrides(spec, {key: value})
+
+
+def _planar_value(spec: mujoco.MjSpec, key: str) -> np.ndarray:
+    """The paper robot's own value of a parameter key (what a factor multiplies)."""
+    p = read_params(_pm.compile_spec(spec, source="model"))  # (compiling leaves the spec as it is)
+    head, _, fld = key.partition(".")
+    if key == "water_density":
+        return np.array([p.rho])
+    if head == "thrusters":
+        t = p.thrusters[0]
+        return np.atleast_1d(np.array({"tau": t.tau, "force_range": t.force_range, "dead_zone": p.dead_zone}[fld],
+                                      dtype=float))
+    b = p.body(head)
+    vals = {"mass": b.mass, "inertia": b.inertia, "added_mass": [b.added_mass[0], b.added_mass[1], b.added_inertia],
+            "drag_coef": b.drag_coef, "volume": b.volume, "cob": b.cob[:2]}
+    return np.atleast_1d(np.array(vals[fld], dtype=float))
+
+
 def compile_robot_spec(path: str | Path, overrides: Mapping[str, Any] | None = None, *,
                        native: bool | None = None, edit=None) -> mujoco.MjModel:
     """Load a robot file, apply named overrides (and ``edit(spec)``), compile.
@@ -298,7 +348,7 @@ def compile_robot_spec(path: str | Path, overrides: Mapping[str, Any] | None = N
     try:
         spec = _pm.load_spec(path)
         if overrides:
-            apply_overrides(spec, overrides)
+            apply_model_overrides(spec, overrides)
         if edit is not None:
             edit(spec)
         return _pm.compile_spec(spec, native=native, source=path.name)

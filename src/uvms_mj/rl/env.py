@@ -113,7 +113,7 @@ from uvms_mj.control.base import Command, Controller, Measurement
 from uvms_mj.sim.loop import SensorModel
 from uvms_mj.plant.params import JOINT_MOTORS, THRUSTERS, TIP_SITE
 from uvms_mj.plant.plant import DivergenceError, Plant
-from uvms_mj.planar.trajectory import StraightLine
+from uvms_mj.control.trajectories import Line3D
 
 __all__ = [
     "DEFAULT_TORQUE_LIMIT",
@@ -301,7 +301,7 @@ class TrackingTask(control.Task):
     def __init__(
         self,
         plant: Plant,
-        trajectory: StraightLine,
+        trajectory: Line3D,
         T: float,
         time_limit: float,
         controller: Controller | None = None,
@@ -352,7 +352,7 @@ class TrackingTask(control.Task):
         self._action_spec = specs.BoundedArray((5,), np.float64, lo, hi, name=name)
         self._tip_scratch = mujoco.MjData(m)  # kinematics only: no passive stage, no callback
         self._tip_site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, TIP_SITE)
-        self._goal = np.asarray(trajectory.target, dtype=float)
+        self._goal = np.asarray(trajectory.target, dtype=float)[:2]  # the paper's plane (x, y)
 
         #: set by :func:`from_plant`: the Environment flattens the observations.
         self.flat_observation = False
@@ -452,7 +452,7 @@ class TrackingTask(control.Task):
             base_velocity=qd[:3],
             joint_velocities=qd[3:5],
             tip=self._tip(q),
-            target=self.trajectory.position(t),
+            target=np.asarray(self.trajectory.position(t), dtype=float)[:2],
             goal=self._goal.copy(),
             time_to_go=np.array([max(self.time_limit - t, 0.0)]),
             thrust=np.clip(d.act[self._thr_act], self._force_lo, self._force_hi),
@@ -470,7 +470,7 @@ class TrackingTask(control.Task):
             return -self.divergence_penalty
         q = physics.data.qpos
         w = self.weights
-        e_tip = float(np.linalg.norm(self._tip(q) - self.trajectory.position(self.k * self.T)))
+        e_tip = float(np.linalg.norm(self._tip(q) - np.asarray(self.trajectory.position(self.k * self.T))[:2]))
         e_base = float(np.hypot(q[0] - self._ref[0], q[1] - self._ref[1]))
         e_att = abs(math.remainder(float(q[2] - self._ref[2]), 2 * math.pi))
         r = -(w.tip * e_tip + w.base * e_base + w.attitude * e_att)
@@ -485,7 +485,7 @@ class TrackingTask(control.Task):
 
 def from_plant(
     plant: Plant,
-    trajectory: StraightLine,
+    trajectory: Line3D,
     *,
     controller: Controller | None = None,
     T: float = 1.0 / 60.0,
@@ -565,8 +565,8 @@ def load(
         raise TypeError(f"scenario = {scenario!r} must be a Scenario, a scenario file path, a PaperExperiment or None")
     T = float(getattr(ctrl, "T", 1.0 / 60.0))
     trajectory = getattr(ctrl, "trajectory", None)
-    if not isinstance(trajectory, StraightLine):
-        raise ValueError(f"controller {getattr(ctrl, 'name', ctrl)!r} exposes no StraightLine trajectory")
+    if not isinstance(trajectory, Line3D):
+        raise ValueError(f"controller {getattr(ctrl, 'name', ctrl)!r} exposes no straight-line (Line3D) trajectory")
     return from_plant(plant, trajectory, controller=ctrl if residual else None, T=T,
                       time_limit=duration if time_limit is None else float(time_limit), sensor=sensor,
                       warm_start=warm, random=random, **kwargs)

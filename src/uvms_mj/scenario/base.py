@@ -136,7 +136,8 @@ def _factory(name: str) -> Callable:
 
 
 def _controller_signature(name: str) -> tuple[dict[str, inspect.Parameter], bool]:
-    """(named keyword parameters except trajectory/nominal, whether it takes **kwargs)."""
+    """(named keyword parameters except those the scenario gives -- trajectory, nominal, robot,
+    arm_trajectory --, whether it takes **kwargs)."""
     factory = _factory(name)
     try:
         sig = inspect.signature(factory)
@@ -144,7 +145,8 @@ def _controller_signature(name: str) -> tuple[dict[str, inspect.Parameter], bool
         return {}, True
     named = {
         p.name: p for p in sig.parameters.values()
-        if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY) and p.name not in ("trajectory", "nominal", "self")
+        if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)
+        and p.name not in ("trajectory", "nominal", "robot", "arm_trajectory", "self")
     }
     return named, any(p.kind == p.VAR_KEYWORD for p in sig.parameters.values())
 

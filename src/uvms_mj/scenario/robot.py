@@ -64,7 +64,7 @@ import numpy as np
 from pydantic import Field, field_validator, model_validator
 
 from uvms_mj.control import ControllerError, available, create
-from uvms_mj.planar.hydro import HydroTerms
+from uvms_mj.physics.terms import HydroTerms
 from uvms_mj.sim.loop import RunResult, run_closed_loop
 from uvms_mj.control.nominal import JointTrajectory, NominalRobot
 from uvms_mj.plant.params import ParameterError

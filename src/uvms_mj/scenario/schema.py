@@ -104,9 +104,10 @@ import yaml
 from pydantic import BaseModel, Field, ValidationError, field_validator, model_validator
 
 from uvms_mj.control import ControllerError, available, create
-from uvms_mj.planar.hydro import HydroTerms
+from uvms_mj.physics.terms import HydroTerms
 from uvms_mj.sim.loop import RunResult, SensorModel, run_closed_loop
-from uvms_mj.planar.nominal import NominalModel
+from uvms_mj.control.nominal import NominalRobot
+from uvms_mj.control.trajectories import Line3D
 from uvms_mj.plant.params import (
     HYDRO_BODIES,
     OVERRIDE_KEYS,
@@ -116,7 +117,6 @@ from uvms_mj.plant.params import (
     read_params,
 )
 from uvms_mj.plant.plant import Plant, default_model_path, models_dir
-from uvms_mj.planar.trajectory import StraightLine
 from uvms_mj.scenario.sections import CurrentSection, Failure, Initial, Vehicle, vehicle_issues, vehicle_params
 from uvms_mj.scenario.base import (  # noqa: F401  (shared names, used here and by uvms_mj.scenario.robot)
     _NO_VALUE,
@@ -256,11 +256,11 @@ def _generic(key: str) -> str:
 
 
 @lru_cache(maxsize=1)
-def _file_nominal() -> NominalModel:
-    return NominalModel()
+def _file_nominal() -> NominalRobot:
+    return NominalRobot(models_dir() / "uvms.xml")
 
 
-_PROBE_PATH = StraightLine(start=(0.0, 0.0), target=(0.3, 0.0))
+_PROBE_PATH = Line3D(start=(0.0, 0.0, 0.0), target=(0.3, 0.0, 0.0))
 
 
 def _check_controller_params(name: str, params: dict) -> list[tuple[tuple, str, Any]]:
@@ -269,7 +269,7 @@ def _check_controller_params(name: str, params: dict) -> list[tuple[tuple, str, 
     named, var_kw = _controller_signature(name)
     # Unknown keys are errors, except for plug-in controllers taking **kwargs (which may use them);
     # the built-in pd swallows other controllers' parameters, so a typo there would pass unseen.
-    strict = not var_kw or getattr(_factory(name), "__module__", "") == "uvms_mj.control.builtin"
+    strict = not var_kw or getattr(_factory(name), "__module__", "").startswith("uvms_mj.control.")
     issues = []
     for key, value in params.items():
         if strict and key not in named:
@@ -285,7 +285,7 @@ def _check_controller_params(name: str, params: dict) -> list[tuple[tuple, str, 
     if issues:
         return issues
 
-    return creation_errors(lambda kw: create(name, trajectory=_PROBE_PATH, nominal=_file_nominal(), **kw), params)
+    return creation_errors(lambda kw: create(name, trajectory=_PROBE_PATH, robot=_file_nominal(), **kw), params)
 
 
 def _fmt_value(v: Any) -> str:
@@ -317,7 +317,7 @@ class Physics(_Section):
 
 
 class Hydro(_Section):
-    """Which hydrodynamic terms the plant applies (:class:`uvms_mj.planar.hydro.HydroTerms`)."""
+    """Which hydrodynamic terms the plant applies (:class:`uvms_mj.physics.terms.HydroTerms`)."""
 
     added_mass: Literal["exact", "lagged", "off"] = "exact"
     drag: Literal["strip", "mujoco", "off"] | None = Field(
@@ -417,7 +417,7 @@ class ControllerSection(_Section):
 
 
 class Trajectory(_Section):
-    """Straight end-tip line (:class:`uvms_mj.planar.trajectory.StraightLine`)."""
+    """Straight end-tip line in the plane (:class:`uvms_mj.control.trajectories.Line3D`, z = 0)."""
 
     target: LengthVec2 | None = Field(None, description="end point, world [x, y] [m]")
     displacement: LengthVec2 | None = Field(None, description="end point minus the initial tip position [m]; "
@@ -852,7 +852,7 @@ def controller_period(scenario: Scenario) -> float:
     p = named.get("T")
     if p is not None and p.default is not inspect.Parameter.empty and _is_number(p.default):
         return float(p.default)
-    from uvms_mj.control.builtin import PAPER_T
+    from uvms_mj.control.digital import PAPER_T
 
     return PAPER_T
 
@@ -887,6 +887,13 @@ def nominal_params(scenario: Scenario) -> RobotParams:
     if not scenario.nominal.overrides:
         return read_params(_robot_file_model())
     return read_params(compile_robot(models_dir() / "uvms.xml", scenario.nominal.overrides))
+
+
+def nominal_robot(scenario: Scenario) -> NominalRobot:
+    """The controller's own model (:class:`uvms_mj.control.nominal.NominalRobot`): the robot
+    model FILE (``models/uvms.xml``) plus nominal.overrides, with or without gravity and
+    buoyancy (nominal.gravity); never the plant."""
+    return NominalRobot(models_dir() / "uvms.xml", scenario.nominal.overrides, gravity=scenario.nominal.gravity)
 
 
 def log_path(scenario: Scenario) -> Path:
@@ -940,14 +947,12 @@ def build(scenario: Scenario) -> tuple[Plant, Any]:
             initial=scenario.initial.state(),
             failures=[f.failure() for f in th.failures],
         )
-        nominal = NominalModel(nominal_params(scenario), gravity=None if scenario.nominal.gravity else (0.0, 0.0))
+        robot = nominal_robot(scenario)
         tr = scenario.trajectory
-        from uvms_mj.planar.kinematics import tip_position
-
-        start = tip_position(nominal.geometry, plant.q)
+        start = robot.tip_at(plant.q)  # the initial tip (x, y) on the nominal model's geometry
         target = np.asarray(tr.target, dtype=float) if tr.target is not None else start + np.asarray(tr.displacement)
-        path = StraightLine(start=tuple(float(v) for v in start), target=tuple(float(v) for v in target),
-                            cruise_speed=tr.cruise_speed, accel=tr.accel, t_start=tr.t_start)
+        path = Line3D(start=(*start.tolist(), 0.0), target=(*target.tolist(), 0.0), cruise_speed=tr.cruise_speed,
+                      accel=tr.accel, t_start=tr.t_start)
         if tr.curve is not None:
             from uvms_mj.control.trajectories import make_trajectory, starting_at
 
@@ -959,7 +964,7 @@ def build(scenario: Scenario) -> tuple[Plant, Any]:
         elif ref == "nominal":
             params["base_reference"] = [float(v) for v in _nominal_initial_pose()]
         params.update(vehicle_params(scenario.vehicle, plant))
-        ctrl = create(scenario.controller.name, trajectory=path, nominal=nominal, **params)
+        ctrl = create(scenario.controller.name, trajectory=path, robot=robot, **params)
     except (ParameterError, ControllerError, ValueError) as exc:
         raise ScenarioError(f"scenario {scenario.name!r}: {exc}") from None
     return plant, ctrl

@@ -23,13 +23,13 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from uvms_mj.control import create
-from uvms_mj.control.builtin import PAPER_GAINS, PAPER_JS, PAPER_T, PAPER_TF
-from uvms_mj.planar.hydro import HydroTerms
-from uvms_mj.planar.kinematics import tip_position
-from uvms_mj.sim.loop import RunResult, SensorModel, run_closed_loop
-from uvms_mj.planar.nominal import NominalModel, params_from_file
+from uvms_mj.control.digital import PAPER_GAINS, PAPER_JS, PAPER_T, PAPER_TF
+from uvms_mj.control.rac import paper_nominal_robot
+from uvms_mj.control.trajectories import Line3D
+from uvms_mj.physics.terms import HydroTerms
+from uvms_mj.plant.params import compile_robot, read_params
 from uvms_mj.plant.plant import Plant
-from uvms_mj.planar.trajectory import StraightLine
+from uvms_mj.sim.loop import RunResult, SensorModel, run_closed_loop
 
 #: Tip displacement of the paper-like path: 0.3 m to the right (world +X), which stretches the
 #: arm through |det B| = Js within ~2 s and ends 0.17 m beyond the reach from the initial base
@@ -51,7 +51,7 @@ def potential_flow_added_mass(plant: Plant) -> dict:
 
 def truth_overrides() -> dict:
     """Plant parameter overrides that make the truth differ from the nominal model."""
-    nominal = params_from_file()
+    nominal = read_params(compile_robot())  # the model file's parameters
     base = nominal.body("base")
     over = potential_flow_added_mass(Plant())
     over["base.volume"] = 1.01 * base.volume
@@ -78,13 +78,14 @@ class PaperExperiment:
     def build(self) -> tuple[Plant, object]:
         over = (truth_overrides() if self.truth else {}) | dict(self.plant_overrides)
         plant = Plant(overrides=over, terms=HydroTerms(drag="mujoco") if self.truth else HydroTerms())
-        nominal = NominalModel()
-        start = tip_position(nominal.geometry, plant.q)
-        path = StraightLine(start=tuple(start), target=tuple(start + np.asarray(self.tip_displacement)),
-                            cruise_speed=self.cruise_speed, accel=self.cruise_speed)
+        robot = paper_nominal_robot()
+        start = robot.tip_at(plant.q)  # the initial tip (x, y) on the nominal model's geometry
+        target = start + np.asarray(self.tip_displacement)
+        path = Line3D(start=(*start.tolist(), 0.0), target=(*target.tolist(), 0.0),
+                      cruise_speed=self.cruise_speed, accel=self.cruise_speed)
         params = dict(T=PAPER_T, gamma=PAPER_GAINS, lam=PAPER_GAINS, js=PAPER_JS, tf=PAPER_TF)
         params.update(self.controller_params)
-        ctrl = create(self.controller, trajectory=path, nominal=nominal, **params)
+        ctrl = create(self.controller, trajectory=path, robot=robot, **params)
         return plant, ctrl
 
     def run(self, on_sample=None) -> RunResult:

@@ -48,9 +48,9 @@ def _thrust_limits(log) -> list[tuple[float, float]] | None:
         except (TypeError, ValueError):
             pass
     try:
-        from uvms_mj.planar.nominal import params_from_file
+        from uvms_mj.plant.params import compile_robot, read_params
 
-        return [tuple(map(float, th.force_range)) for th in params_from_file().thrusters]
+        return [tuple(map(float, th.force_range)) for th in read_params(compile_robot()).thrusters]
     except Exception:  # noqa: BLE001 (the limits are decoration: never fail a plot on them)
         return None
 
@@ -66,7 +66,7 @@ def _js(log) -> tuple[float, str] | None:
             except (TypeError, ValueError):
                 pass
     try:
-        from uvms_mj.control.builtin import PAPER_JS
+        from uvms_mj.control.digital import PAPER_JS
 
         return float(PAPER_JS), " (paper)"
     except Exception:  # noqa: BLE001
@@ -76,9 +76,9 @@ def _js(log) -> tuple[float, str] | None:
 def _geometry():
     """(base box half extents, joint-1 offset, l1, l2) from the model file, or None."""
     try:
-        from uvms_mj.planar.nominal import params_from_file
+        from uvms_mj.plant.params import compile_robot, read_params
 
-        p = params_from_file()
+        p = read_params(compile_robot())
         return p.body("base").box_half, p.joint1_offset, *p.link_lengths
     except Exception:  # noqa: BLE001
         return None

@@ -21,9 +21,11 @@ from pathlib import Path
 import numpy as np
 
 from uvms_mj.physics import build as _build
-from uvms_mj.planar import native as _native
-from uvms_mj.planar.hydro import HydroModel, HydroTerms
-from uvms_mj.planar.kinematics import ArmGeometry
+from oracles.planar import native as _native
+from uvms_mj.physics.terms import default_backend
+from oracles.planar.hydro import HydroModel
+from uvms_mj.physics.terms import HydroTerms
+from oracles.planar.kinematics import ArmGeometry
 from uvms_mj.plant.params import RobotParams, read_params
 
 _TRIL = np.tril_indices(5)
@@ -76,7 +78,7 @@ class _Evaluator:
     def __init__(self, hydro: HydroModel) -> None:
         self.hydro = hydro
         self.lib = None
-        if _native.default_backend() != "python":  # UVMS_MJ_COMPILED (physics.build.compiled_mode)
+        if default_backend() != "python":  # UVMS_MJ_COMPILED (physics.build.compiled_mode)
             self.lib = _native.load()
             if self.lib is None:
                 _build.fallback("the planar nominal model's C code", _native.unavailable_reason() or "")

@@ -1,4 +1,4 @@
-"""Desired end-tip trajectory: a straight line with a trapezoidal speed profile.
+"""Test oracle: the paper's planar straight line with a trapezoidal speed profile (scalar code, 2-D).
 
 The tip starts at rest at ``start``, waits ``t_start`` seconds, accelerates at ``accel`` to
 ``cruise_speed``, cruises, and decelerates to rest exactly at ``target`` (a triangular profile
@@ -13,17 +13,7 @@ from functools import cached_property
 
 import numpy as np
 
-
-def trapezoid_profile(cruise_speed: float, accel: float, length: float) -> tuple[float, float, float]:
-    """(peak speed v [m/s], ramp time t_r [s], cruise time t_c [s]) of a rest-to-rest move over
-    ``length`` with constant acceleration ``accel`` up to ``cruise_speed`` (triangular, with
-    v = sqrt(accel length), when the line is too short to reach it)."""
-    v, a, L = cruise_speed, accel, length
-    if v * v / a > L:  # triangular
-        v = math.sqrt(a * L)
-    t_ramp = v / a
-    t_cruise = (L - v * t_ramp) / v if v > 0 else 0.0
-    return v, t_ramp, t_cruise
+from uvms_mj.control.trajectories import trapezoid_profile
 
 
 @dataclass(frozen=True)

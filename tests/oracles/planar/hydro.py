@@ -1,4 +1,4 @@
-"""Hydrodynamics of the planar robot in closed form: the plant's ground truth.
+"""Test oracle: hydrodynamics of the paper's planar robot in closed form (independent of the plugins).
 
 Everything here is plain Python on floats (no numpy in the hot path: for 3 bodies the scalar
 closed form is ~10x faster than generic numpy Jacobian products).
@@ -33,34 +33,8 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from uvms_mj.physics.terms import HydroTerms  # noqa: F401  (the terms this oracle switches)
 from uvms_mj.plant.params import RobotParams
-
-
-@dataclass(frozen=True)
-class HydroTerms:
-    """Which hydrodynamic terms the plant applies (all on by default).
-
-    Attributes:
-        added_mass: "exact" (in the mass matrix, every step), "lagged" (-M_A times the previous
-            step's acceleration, as some peer simulators do: kept only to show that it
-            diverges), or "off".
-        drag: "strip" (paper Eqs. 2-3), "mujoco" (MuJoCo's ellipsoid model with its
-            virtual-mass terms removed, since added mass is ours), or "off".
-        buoyancy: apply -rho V g at each centre of buoyancy.
-    """
-
-    added_mass: str = "exact"
-    drag: str = "strip"
-    buoyancy: bool = True
-
-    def __post_init__(self) -> None:
-        allowed = {"added_mass": ("exact", "lagged", "off"), "drag": ("strip", "mujoco", "off")}
-        for field, values in allowed.items():
-            v = getattr(self, field)
-            if v not in values:
-                raise ValueError(f"HydroTerms.{field} = {v!r}; allowed: {', '.join(values)}")
-        if not isinstance(self.buoyancy, bool):
-            raise ValueError(f"HydroTerms.buoyancy = {self.buoyancy!r}; allowed: True, False")
 
 
 # The exact strip-theory integrals (paper Eqs. 2-3) are shared with the generic 3-D reference

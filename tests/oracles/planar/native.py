@@ -20,9 +20,9 @@ from typing import TYPE_CHECKING
 from uvms_mj.physics import build as _build
 
 if TYPE_CHECKING:
-    from uvms_mj.planar.hydro import HydroModel
+    from oracles.planar.hydro import HydroModel
 
-BACKENDS = ("auto", "python", "native")
+from uvms_mj.physics.terms import BACKENDS  # noqa: F401
 SOURCE = Path(__file__).resolve().parent / "_native" / "hydro.c"
 
 # Must match hydro.c.
@@ -151,12 +151,3 @@ def load() -> NativeLib | None:
 def unavailable_reason() -> str | None:
     """Why :func:`load` returned None (None if it has not been tried or succeeded)."""
     return _error
-
-
-def default_backend() -> str:
-    """The hydrodynamics backend that ``UVMS_MJ_COMPILED`` implies when none is asked for:
-    "auto" (auto), "native" (on) or "python" (off).
-
-    Raises:
-        uvms_mj.physics.build.CompiledModeError: a bad value, or a former switch set."""
-    return {"auto": "auto", "on": "native", "off": "python"}[_build.compiled_mode()]

@@ -1,1 +1,0 @@
-"""The paper robot's planar closed forms (to become test oracles)."""
