@@ -126,6 +126,7 @@ def test_replay_tracks_the_arm_and_is_step_independent(excerpt, model):
     assert sc2.tracking_deg < s2r.MAX_TRACKING_ERROR_DEG
 
 
+@pytest.mark.slow
 def test_identification_recovers_known_parameters(excerpt):
     """Closed loop: the IMU of a trial replaced by the model's own attitude with known parameters."""
     names = ("cob_z", "roll_damping")
@@ -183,6 +184,7 @@ def test_cli_sim2real_on_the_excerpt(tmp_path):
     assert sorted(p.name for p in (tmp_path / "p").iterdir()) == ["sim2real_015-0.png", "sim2real_026-0.png"]
 
 
+@pytest.mark.slow
 def test_cli_identify_fit_one_score_the_other(tmp_path):
     over = tmp_path / "id.yaml"
     js = tmp_path / "id.json"
