@@ -183,20 +183,20 @@ def test_thruster_lag_checked_against_the_timestep(cli, tmp_path):
 def test_yaml_classes(text, needle, cli, tmp_path):
     f = tmp_path / "case.yaml"
     f.write_bytes(text.encode("utf-8", "surrogateescape") if text != "\xff\xfe" else b"\xff\xfe\x00")
-    t0 = time.perf_counter()
+    # (no wall-clock bound: the message names the refusal -- aliases, nesting, size -- so the
+    # input was refused before it was expanded or recursed into, which is what a bound would guard)
     for cmd in (("validate", f), ("run", f, "--set", "duration=0.3", "--no-plots")):
         res = cli(*cmd)
         _usage_error(res, str(f), needle)
-    assert time.perf_counter() - t0 < 2.0
     assert not any(tmp_path.glob("**/*.mcap"))
 
 
-def test_billion_laughs_answers_fast(cli, tmp_path):
+def test_billion_laughs_is_refused_unexpanded(cli, tmp_path):
+    """10^9 "lol"s through 9 levels of aliases: refused for its aliases (by the reader, before any
+    expansion; an expansion would not finish, so no wall-clock bound is needed to see it)."""
     lines = ['a0: &a0 "lol"'] + [f"a{i}: &a{i} [" + ", ".join([f"*a{i - 1}"] * 10) + "]" for i in range(1, 10)]
     f = _write(tmp_path, "\n".join(lines) + "\ndescription: *a9\n")
-    t0 = time.perf_counter()
     _usage_error(cli("validate", f), "aliases")
-    assert time.perf_counter() - t0 < 1.0
 
 
 def test_endless_input_is_refused():
@@ -535,7 +535,7 @@ def test_sweep_workers_end_with_a_killed_sweep(tmp_path):
     assert len(kids) >= 2, "no workers started"
     os.kill(p.pid, signal.SIGKILL)
     p.wait(timeout=10)
-    deadline = time.time() + 5
+    deadline = time.time() + 30  # a hang guard, not a speed claim
     while time.time() < deadline and any(Path(f"/proc/{k}").exists() for k in kids):
         time.sleep(0.1)
     alive = [k for k in kids if Path(f"/proc/{k}").exists()

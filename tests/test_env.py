@@ -80,7 +80,9 @@ def _assert_same_run(obs, res):
     s = res.signals
     assert res.status == "ok"
     assert obs["base_pose"].shape[0] == s["q_true"].shape[0]
-    # Bit for bit: same plant configuration, same measurements, same warm start, same stepping.
+    # Bit for bit: same plant configuration, same measurements, same warm start, same stepping --
+    # the same code on both sides (the controller object, mj_step; the loop's compiled sample only
+    # copies), so no operation order that could differ with the CPU's vector instructions.
     np.testing.assert_array_equal(np.c_[obs["base_pose"], obs["joint_angles"]], s["q_true"])
     np.testing.assert_array_equal(np.c_[obs["base_velocity"], obs["joint_velocities"]], s["qd_true"])
     np.testing.assert_array_equal(obs["tip"], s["tip_true"])

@@ -48,3 +48,15 @@ def test_dm_control_is_optional():
     assert "mujoco==3.17.0" in pyproject["project"]["dependencies"]
     for pkg in ("gymnasium", "shimmy", "pyarrow", "scipy"):
         assert any(d.startswith(pkg) for d in extras["test"]), pkg
+
+
+def test_pool_trials_in_the_repository_not_in_the_distributions():
+    """data/hinsdale-2023 (17 MB, MIT) is in the git repository for sim2real / identify and the
+    tests, and excluded from the sdist and the wheel (anchored, so tests/data stays in the sdist;
+    checked with hatchling's builders: 74 files of data/ otherwise in the sdist, none with it)."""
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    targets = pyproject["tool"]["hatch"]["build"]["targets"]
+    assert targets["sdist"]["exclude"] == ["/data/"] and targets["wheel"]["exclude"] == ["/data/"]
+    data = ROOT / "data" / "hinsdale-2023"
+    assert "MIT License" in (data / "LICENSE").read_text()
+    assert len(list((data / "trials").glob("*_imu.csv"))) == 18

@@ -657,6 +657,8 @@ def test_rollout_one_and_two_threads_bit_identical():
         mujoco.mj_getState(m, d, init[i], mujoco.mjtState.mjSTATE_FULLPHYSICS)
     s1, _ = rollout.rollout(m, [mujoco.MjData(m)], init, nstep=200)
     s2, _ = rollout.rollout(m, [mujoco.MjData(m), mujoco.MjData(m)], init, nstep=200)
+    # exact: threads split the trajectories, not the arithmetic of one (the same compiled mj_step,
+    # no CPU-dependent dispatch in MuJoCo or the plugins, built with -ffp-contract=off)
     np.testing.assert_array_equal(s1, s2)
     # and a plain serial loop gives the same
     mujoco.mj_setState(m, d, init[3], mujoco.mjtState.mjSTATE_FULLPHYSICS)
@@ -772,5 +774,8 @@ def test_valid_forms_of_added_mass_are_equivalent():
         d = mujoco.MjData(m)
         mujoco.mj_forward(m, d)
         Ms.append(d.M.copy())
-    np.testing.assert_array_equal(Ms[0], Ms[1])
-    np.testing.assert_array_equal(Ms[0], Ms[2])
+    # the forms may reach M_A through different operations in the plugin (measured: bit for bit);
+    # a few ulps of M's scale
+    tol = 1e-14 * np.abs(Ms[0]).max()
+    np.testing.assert_allclose(Ms[1], Ms[0], rtol=0, atol=tol)
+    np.testing.assert_allclose(Ms[2], Ms[0], rtol=0, atol=tol)

@@ -373,6 +373,7 @@ def test_cli_render_camera(recorded, tmp_path) -> None:
 # ------------------------------------------------------------------ figures
 
 
+@pytest.mark.slow
 def test_plots_with_and_without_optional_signals(recorded, alpha, tmp_path) -> None:
     from uvms_mj.analysis.plots import plot_comparison, plot_run
 

@@ -124,7 +124,9 @@ def test_paper_robot_planar_rows_reproduce_the_3x3_matrix():
     B = allocation_matrix(m)
     A = planar_matrix(NominalModel().params.thrusters)
     assert B.shape == (6, 3)
-    np.testing.assert_array_equal(B[[0, 1, 5]], A)  # exactly
+    # MuJoCo's site frames vs the planar closed form: the same numbers by different operations
+    # (measured: bit for bit), so to a few ulps of the O(1) entries
+    np.testing.assert_allclose(B[[0, 1, 5]], A, rtol=0, atol=1e-15 * max(1.0, np.abs(A).max()))
     np.testing.assert_allclose(B[[2, 3, 4]], 0.0, atol=1e-15)  # planar thrusters: no z, roll, pitch
     d = mujoco.MjData(m)  # any configuration: the body-frame matrix does not move
     d.qpos[:] = [0.4, -0.7, 1.1, 0.3, -0.5]
@@ -320,6 +322,7 @@ def test_heavy_attainable_wrenches_are_reproduced(heavy, rng, weights):
     assert "redistribution" in methods
 
 
+@pytest.mark.slow
 def test_heavy_saturated_matches_exhaustive_optimum(heavy, rng):
     m, d = heavy
     alloc = heavy_allocator(m, d, weights=[1, 1, 1, 4, 4, 4])

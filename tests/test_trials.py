@@ -3,8 +3,9 @@
 Truths: the raw CSV text (a known row of a real file), hand-made synthetic folders (the expected
 de-duplication and the file:line of each defect), and for the equilibrium a hand computation on
 a small synthetic model (sums of point forces, closed-form angles), independent of the solver.
-The real data (shared/data/hinsdale-2023, outside the repository) are optional: those tests
-skip when the folder is absent (set UVMS_MJ_HINSDALE to point elsewhere).
+The real data are shipped in the repository (data/hinsdale-2023, the 18 trials with their MIT
+licence; UVMS_MJ_HINSDALE points elsewhere): those tests skip only when the folder is absent
+(an sdist or wheel, which leave data/ out).
 """
 
 from __future__ import annotations
@@ -30,9 +31,7 @@ OFFSETS = np.array([3.07, 0.0, 0.0, 2.879])  # the model's numeric, stated indep
 
 def hinsdale_dir() -> Path | None:
     env = os.environ.get("UVMS_MJ_HINSDALE")
-    for cand in ([Path(env)] if env else []) + [
-        Path(__file__).resolve().parents[2] / "shared" / "data" / "hinsdale-2023",
-    ]:
+    for cand in ([Path(env)] if env else []) + [REPO / "data" / "hinsdale-2023"]:
         for d in (cand / "trials", cand):
             if d.is_dir() and any(d.glob("*_imu.csv")):
                 return d

@@ -27,7 +27,26 @@ def _names(value: str | None) -> list[str] | None:
     return out or None
 
 
-def _trial_dir(path: str) -> Path:
+def default_data_dir() -> Path | None:
+    """The pool trials shipped in the repository (``data/hinsdale-2023``): next to the package's
+    checkout (an editable install: ``src/uvms_mj`` -> the repository root), else under the current
+    folder; None when neither holds them (a wheel install: the data are not in the wheel)."""
+    pkg = Path(__file__).resolve().parents[1]  # the uvms_mj package folder
+    for root in (pkg.parents[1], Path.cwd()):
+        cand = root / "data" / "hinsdale-2023"
+        if (cand / "trials").is_dir():
+            return cand
+    return None
+
+
+def _trial_dir(path: str | None) -> Path:
+    if path is None:
+        found = default_data_dir()
+        if found is None:
+            click.echo("error: no DATA_DIR given and data/hinsdale-2023 not found (in the package's checkout or "
+                       "the current folder): pass DATA_DIR, a folder of trials", err=True)
+            sys.exit(2)
+        path = str(found)
     p = Path(path)
     if not p.is_dir():
         raise click.UsageError(f"data folder {path!r} does not exist")
@@ -152,7 +171,7 @@ def _cfg(dt: float | None, neutral: bool):
 
 
 @click.command()
-@click.argument("data_dir", type=click.Path())
+@click.argument("data_dir", type=click.Path(), required=False)
 @click.option("--trials", "trial_names", default=None, metavar="A,B,...", help="Comma-separated trial names (default: all).")
 @click.option("--model", default="hinsdale2023", show_default=True, help="Model name in models/ or an MJCF file.")
 @click.option("--overrides", default=None, type=click.Path(), metavar="FILE",
@@ -168,7 +187,9 @@ def _cfg(dt: float | None, neutral: bool):
               help="With --overrides and --plots: also draw the model without the overrides (dashed).")
 def sim2real(data_dir, trial_names, model, overrides, json_out, plots_dir, dt, as_is, jobs, plot_nominal) -> None:
     """Replay the pool trials of DATA_DIR in the model (arm motion imposed, thrusters off, measured
-    initial attitude and velocity) and compare simulated roll and pitch with the IMU."""
+    initial attitude and velocity) and compare simulated roll and pitch with the IMU.
+
+    DATA_DIR defaults to the trials shipped in a checkout, data/hinsdale-2023."""
     from uvms_mj.analysis.identify import run_trials
     from uvms_mj.analysis.sim2real import MAX_TRACKING_ERROR_DEG, plot_trial
 
@@ -211,7 +232,7 @@ def sim2real(data_dir, trial_names, model, overrides, json_out, plots_dir, dt, a
 
 
 @click.command("identify")
-@click.argument("data_dir", type=click.Path())
+@click.argument("data_dir", type=click.Path(), required=False)
 @click.option("--fit", "fit_names", default=None, metavar="A,B,...", help="Trials to fit on.")
 @click.option("--score", "score_names", default=None, metavar="C,D,...",
               help="Trials to score (default: every other trial that loads; never a fit trial).")
@@ -232,7 +253,9 @@ def sim2real(data_dir, trial_names, model, overrides, json_out, plots_dir, dt, a
 def identify_cmd(data_dir, fit_names, score_names, cv, trial_names, param_names, model, overrides, out, json_out, fit_dt,
              max_nfev, jobs, quiet) -> None:
     """Fit uncertain model parameters to the roll and pitch of chosen trials (bounded least squares)
-    and report the error on other trials; write the identified values as an override file."""
+    and report the error on other trials; write the identified values as an override file.
+
+    DATA_DIR defaults to the trials shipped in a checkout, data/hinsdale-2023."""
     from uvms_mj.analysis.identify import (
         DEFAULT_FIT_DT,
         DEFAULT_PARAMS,
