@@ -131,7 +131,9 @@ def test_backend_choice(monkeypatch):
 def test_unavailable_plugins_native_is_an_error(monkeypatch):
     monkeypatch.setattr(build, "_registered", False)
     monkeypatch.setattr(build, "_reason", "no C compiler found (Debian: apt-get install gcc; or set CC)")
-    with pytest.raises(build.PluginUnavailableError, match=r"no C compiler found.*apt-get install gcc"):
+    monkeypatch.setattr(build, "_warned", False)  # UVMS_MJ_COMPILED=auto: the process's one warning, then the error
+    with pytest.warns(RuntimeWarning, match="uvms C plugins unavailable"), \
+            pytest.raises(build.PluginUnavailableError, match=r"no C compiler found.*apt-get install gcc"):
         Plant(backend="native")
 
 

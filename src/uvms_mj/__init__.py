@@ -23,9 +23,7 @@ references: ``auto`` (default) compiled where a C compiler is available, else Py
 warning; ``on`` compiled or a clear error; ``off`` Python everywhere.
 """
 
-from __future__ import annotations
-
-from typing import Any
+from __future__ import annotations  # (no typing import: the command line's start-up passes here first)
 
 #: Public name -> the module that defines it (imported on first access, see __getattr__).
 _EXPORTS = {
@@ -45,7 +43,7 @@ __all__ = sorted(_EXPORTS)
 __version__ = "0.1.0"
 
 
-def __getattr__(name: str) -> Any:
+def __getattr__(name: str) -> object:
     module = _EXPORTS.get(name)
     if module is None:
         raise AttributeError(f"module 'uvms_mj' has no attribute {name!r}")

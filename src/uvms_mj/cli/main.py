@@ -32,8 +32,14 @@ def _exit_130(*_) -> None:
     os._exit(130)
 
 
-if sys.argv and os.path.basename(sys.argv[0]) == "uvms-mj":  # only the installed command's own process,
-    signal.signal(signal.SIGINT, _exit_130)  # starting up: a Ctrl-C during its imports (never an importer)
+if __name__ == "__main__" or (sys.argv and os.path.basename(sys.argv[0]) == "uvms-mj"):
+    # The command line's own process starting up (never a module that imports this one): a Ctrl-C
+    # during its imports exits 130 quietly, and without a display MUJOCO_GL is set to a headless
+    # backend before mujoco is imported (no GLFW probe; its children, e.g. sweep workers, inherit it).
+    signal.signal(signal.SIGINT, _exit_130)
+    from uvms_mj.analysis.render_gl import configure_gl
+
+    configure_gl()
 
 import click  # noqa: E402
 

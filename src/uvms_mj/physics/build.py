@@ -54,6 +54,7 @@ __all__ = [
     "cache_dir",
     "compile_library",
     "compiled_mode",
+    "fallback",
     "library_path",
     "register_plugins",
     "sources",
