@@ -32,9 +32,9 @@ BOTH_AXES_DRAG = {"link1.drag_coef": [0.9, 1.2], "link2.drag_coef": [0.7, 1.1]}
 
 @pytest.fixture(scope="module")
 def lib() -> native.NativeLib:
-    found = native.load()
+    found = native.load_native()
     if found is None:
-        pytest.skip(f"native backend unavailable: {native.unavailable_reason()}")
+        pytest.skip(f"native backend unavailable: {native.native_unavailable_reason()}")
     return found
 
 
@@ -99,13 +99,13 @@ def test_build_failures_are_reported(monkeypatch, tmp_path, cc, pattern):
     monkeypatch.setenv(build.ENV_CACHE, str(tmp_path))
     monkeypatch.setenv("CC", cc)
     with pytest.raises(native.NativeUnavailableError, match=pattern):
-        native.build()
+        native.build_native()
     assert not [f for f in tmp_path.iterdir() if f.name.startswith(".nominal")]  # no temporary file left
 
 
 def test_parallel_builds_share_one_library(lib, tmp_path):
     """Four processes building into an empty cache at once: one library, no leftovers, all load."""
-    code = "import oracles.planar.native as n; lib = n.NativeLib(n.build()); print(lib.path)"
+    code = "import oracles.planar.native as n; lib = n.NativeLib(n.build_native()); print(lib.path)"
     tests_dir = os.path.dirname(os.path.abspath(__file__))  # the oracles package lives there
     env = {**os.environ, build.ENV_CACHE: str(tmp_path),
            "PYTHONPATH": os.pathsep.join(filter(None, (tests_dir, os.environ.get("PYTHONPATH"))))}

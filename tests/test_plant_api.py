@@ -144,8 +144,8 @@ def test_step_observe_is_step_then_observe(kind):
     from uvms_mj.plant.layout import InitialState
     from uvms_mj.plant.plant import Plant
 
-    if plant_io.library() is None:
-        pytest.skip(f"no compiled plant sample: {plant_io.unavailable_reason()}")
+    if plant_io.plant_io_library() is None:
+        pytest.skip(f"no compiled plant sample: {plant_io.plant_io_unavailable_reason()}")
 
     def make():
         if kind == "paper":

@@ -27,7 +27,7 @@ from uvms_mj.scenario.schema import build, load_scenario, sensor_model
 
 SCEN = Path(__file__).resolve().parents[1] / "scenarios"
 
-needs_kernel = pytest.mark.skipif(kernel.library() is None, reason=f"no RAC kernel: {kernel.unavailable_reason()}")
+needs_kernel = pytest.mark.skipif(kernel.library() is None, reason=f"no RAC kernel: {kernel.kernel_unavailable_reason()}")
 
 
 def _run(name: str, sets: list[str], use_kernel: bool):
@@ -110,7 +110,7 @@ def kernel_mode(monkeypatch):
 def test_kernel_off_runs_the_python_code(kernel_mode):
     """UVMS_MJ_COMPILED=off: every RAC on its Python code, and the reason is said."""
     assert kernel_mode("off") is None
-    assert "UVMS_MJ_COMPILED=off" in kernel.unavailable_reason()
+    assert "UVMS_MJ_COMPILED=off" in kernel.kernel_unavailable_reason()
     sc = load_scenario(SCEN / "paper.yaml", ["duration=1"])
     plant, ctrl = build(sc)
     res = run_closed_loop(plant, ctrl, sc.duration, T=ctrl.T)

@@ -108,10 +108,10 @@ DEFAULT_FIT_DT = 0.01
 def _spec_values(model, base: Mapping[str, Any]) -> dict:
     """The model values the parameters act on (after the base overrides)."""
     from uvms_mj.physics.model import body_config, load_spec
-    from uvms_mj.analysis.sim2real import apply_overrides
+    from uvms_mj.analysis.sim2real import apply_trial_overrides
 
     spec = load_spec(model_path(model))
-    apply_overrides(spec, base)
+    apply_trial_overrides(spec, base)
     nums = lambda s: [float(x) for x in str(s).split()]  # noqa: E731
     vals = {"cob": nums(body_config(spec, "bluerov2").get("cob", "0 0 0")),
             "lin": nums(body_config(spec, "bluerov2_hull").get("linear_damping", "0 0 0 0 0 0")),

@@ -35,7 +35,7 @@ Per trial (:func:`simulate_trial`):
    removing it, and the error of the settled attitude change over each arm move
    (:func:`settled_changes`).
 
-Parameter overrides (:func:`load_overrides`, :func:`apply_overrides`) change the model before it
+Parameter overrides (:func:`load_overrides`, :func:`apply_trial_overrides`) change the model before it
 is compiled: a YAML mapping ``"BODY.ATTRIBUTE": value`` (a ``uvms.hydro`` attribute of that body,
 ``docs/hydrodynamics.md``: ``volume``, ``cob``, ``pos``, ``added_mass``, ``linear_damping``,
 ``quadratic_damping``, ...), ``"BODY.mass": kg`` (the body's own mass), or
@@ -68,7 +68,7 @@ __all__ = [
     "SimConfig",
     "SimResult",
     "TrialScore",
-    "apply_overrides",
+    "apply_trial_overrides",
     "arm_moves",
     "best_lag",
     "build_model",
@@ -184,7 +184,7 @@ def _check_value(key: str, v: Any, source: str) -> list[float]:
     return f
 
 
-def apply_overrides(spec: mujoco.MjSpec, overrides: Mapping[str, Any], source: str = "overrides") -> None:
+def apply_trial_overrides(spec: mujoco.MjSpec, overrides: Mapping[str, Any], source: str = "overrides") -> None:
     """Apply ``{"BODY.ATTRIBUTE": value}`` to a spec (before compiling).
 
     Raises:
@@ -231,7 +231,7 @@ def build_model(model: str | Path = DEFAULT_MODEL, overrides: Mapping[str, Any] 
     path = model_path(model)
     spec = load_spec(path)
     overrides = dict(overrides or {})
-    apply_overrides(spec, overrides)
+    apply_trial_overrides(spec, overrides)
     m = compile_spec(spec, source=path.name)
     root = _root_body(m)
     if neutral and f"{m.body(root).name}.mass" not in overrides:

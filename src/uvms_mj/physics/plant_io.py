@@ -1,7 +1,7 @@
 """One control sample of a plant's input and output, compiled (``plant_io.c``).
 
 :meth:`uvms_mj.plant.plant.Plant.step_observe` (n steps, the divergence checks, the new state) runs
-through :func:`library` when it can: the same steps and numbers as its Python code (the
+through :func:`plant_io_library` when it can: the same steps and numbers as its Python code (the
 reference, used with ``UVMS_MJ_COMPILED=off``, without a C compiler or on the Python hydrodynamics
 backend), in one call instead of a dozen numpy and MuJoCo calls. Built and loaded like the RAC
 kernel (:mod:`uvms_mj.control.kernel`), by :class:`uvms_mj.physics.build.CompiledOnce`.
@@ -16,7 +16,8 @@ import numpy as np
 
 from uvms_mj.physics import build
 
-SOURCE = Path(__file__).resolve().parent / "plant_io.c"
+#: The compiled sample's C source.
+PLANT_IO_SOURCE = Path(__file__).resolve().parent / "plant_io.c"
 
 
 def _configure(lib: ctypes.CDLL):
@@ -26,16 +27,17 @@ def _configure(lib: ctypes.CDLL):
     return fn
 
 
-_LOADER = build.CompiledOnce("uvms_plant_io", [SOURCE], "the compiled plant sample", _configure)
+_LOADER = build.CompiledOnce("uvms_plant_io", [PLANT_IO_SOURCE], "the compiled plant sample", _configure)
 
 
-def library():
-    """The compiled ``uvms_plant_step_observe`` (ctypes function), or None (:func:`unavailable_reason`)."""
+def plant_io_library():
+    """The compiled ``uvms_plant_step_observe`` (ctypes function), or None
+    (:func:`plant_io_unavailable_reason`)."""
     return _LOADER.get()
 
 
-def unavailable_reason() -> str | None:
-    """Why :func:`library` returned None (None if it was not tried or is loaded)."""
+def plant_io_unavailable_reason() -> str | None:
+    """Why :func:`plant_io_library` returned None (None if it was not tried or is loaded)."""
     return _LOADER.reason
 
 

@@ -45,8 +45,11 @@ def skew(x: np.ndarray) -> np.ndarray:
     return np.array([[0.0, -x[2], x[1]], [x[2], 0.0, -x[0]], [-x[1], x[0], 0.0]])
 
 
-def quat_to_mat(quat: np.ndarray) -> np.ndarray:
-    """Rotation matrix of a unit quaternion (w x y z)."""
+def _quat_to_mat(quat: np.ndarray) -> np.ndarray:
+    """Rotation matrix of a unit quaternion (w x y z), by MuJoCo's ``mju_quat2Mat``.
+
+    Kept apart from :func:`uvms_mj.rotations.quat_to_mat` (a closed form): this reference
+    composes frames with MuJoCo's own routine, as the C plugin does."""
     R = np.zeros(9)
     mujoco.mju_quat2Mat(R, np.asarray(quat, float) / np.linalg.norm(quat))
     return R.reshape(3, 3)
@@ -58,7 +61,7 @@ def hydro_frame(m: mujoco.MjModel, d: mujoco.MjData, b: int, pos, quat) -> tuple
         p = x_b + R_b pos,   R = R_b R(quat).
     """
     Rb = d.xmat[b].reshape(3, 3)
-    return d.xpos[b] + Rb @ np.asarray(pos, float), Rb @ quat_to_mat(quat)
+    return d.xpos[b] + Rb @ np.asarray(pos, float), Rb @ _quat_to_mat(quat)
 
 
 def body_jacobian(m: mujoco.MjModel, d: mujoco.MjData, b: int, pos, quat) -> np.ndarray:

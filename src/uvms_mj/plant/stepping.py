@@ -154,7 +154,7 @@ class Stepping:
         from uvms_mj.physics import plant_io
 
         self._io_tried = self.data
-        fn = plant_io.library()
+        fn = plant_io.plant_io_library()
         if fn is None:
             return None
         m = self.model

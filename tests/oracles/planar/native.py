@@ -23,7 +23,8 @@ if TYPE_CHECKING:
     from oracles.planar.hydro import HydroModel
 
 from uvms_mj.physics.terms import BACKENDS  # noqa: F401
-SOURCE = Path(__file__).resolve().parent / "_native" / "hydro.c"
+#: The native evaluator's C source.
+NATIVE_SOURCE = Path(__file__).resolve().parent / "_native" / "hydro.c"
 
 # Must match hydro.c.
 NV = 5
@@ -119,20 +120,20 @@ _error: str | None = None
 _tried = False
 
 
-def build(force: bool = False) -> Path:
+def build_native(force: bool = False) -> Path:
     """Compile hydro.c into the cache (if not there yet) and return the library's path.
 
     Raises:
         NativeUnavailableError: no compiler, or the compilation failed."""
     try:
-        return _build.compile_library("nominal", [SOURCE], force=force)
+        return _build.compile_library("nominal", [NATIVE_SOURCE], force=force)
     except _build.PluginUnavailableError as exc:
         raise NativeUnavailableError(str(exc)) from None
 
 
-def load() -> NativeLib | None:
+def load_native() -> NativeLib | None:
     """The native library (built on first use), or None if it cannot be built or loaded
-    (:func:`unavailable_reason` says why). Cached for the process."""
+    (:func:`native_unavailable_reason` says why). Cached for the process."""
     global _lib, _error, _tried
     with _lock:
         if _tried:
@@ -140,14 +141,14 @@ def load() -> NativeLib | None:
         _tried = True
         try:
             try:
-                _lib = NativeLib(build())
+                _lib = NativeLib(build_native())
             except OSError:  # a damaged cache file: rebuild once
-                _lib = NativeLib(build(force=True))
+                _lib = NativeLib(build_native(force=True))
         except (NativeUnavailableError, OSError) as exc:
             _lib, _error = None, str(exc)
         return _lib
 
 
-def unavailable_reason() -> str | None:
-    """Why :func:`load` returned None (None if it has not been tried or succeeded)."""
+def native_unavailable_reason() -> str | None:
+    """Why :func:`load_native` returned None (None if it has not been tried or succeeded)."""
     return _error

@@ -79,9 +79,9 @@ class _Evaluator:
         self.hydro = hydro
         self.lib = None
         if default_backend() != "python":  # UVMS_MJ_COMPILED (physics.build.compiled_mode)
-            self.lib = _native.load()
+            self.lib = _native.load_native()
             if self.lib is None:
-                _build.fallback("the planar nominal model's C code", _native.unavailable_reason() or "")
+                _build.fallback("the planar nominal model's C code", _native.native_unavailable_reason() or "")
         if self.lib is not None:
             self.params = _native.make_params(hydro)
             self.buf = {k: np.zeros(n) for k, n in (("q", 5), ("qd", 5), ("w", 2), ("g", 2), ("m", 15), ("f", 5))}

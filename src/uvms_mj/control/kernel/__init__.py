@@ -10,7 +10,7 @@ and library, a cache keyed on every input) the first time it is needed.
 ``UVMS_MJ_COMPILED=off`` (default ``auto``, :func:`uvms_mj.physics.build.compiled_mode`) keeps
 every RAC on its Python code; without a C compiler (under ``auto``), or on the Python
 hydrodynamics backend (the nominal model's forces then come from a
-Python callback), the Python code runs too. :func:`unavailable_reason` says why not.
+Python callback), the Python code runs too. :func:`kernel_unavailable_reason` says why not.
 """
 
 from __future__ import annotations
@@ -24,7 +24,8 @@ from uvms_mj.physics import build
 
 #: The largest dof, task, arm and thruster-row count the C code's fixed buffers take.
 MAXN = 32
-SOURCE = Path(__file__).resolve().parent / "rac_kernel.c"
+#: The kernel's C source.
+KERNEL_SOURCE = Path(__file__).resolve().parent / "rac_kernel.c"
 
 _INT_FIELDS = ("nq", "nv", "nb", "na", "ntask", "nbt", "ntr", "nvec", "free_base", "tip_orient", "square",
                "observer", "observer_arm", "clip_alloc", "alloc_input", "nthr", "nwr", "nmot", "base_body",
@@ -64,16 +65,16 @@ def _configure(lib: ctypes.CDLL) -> ctypes.CDLL:
     return lib
 
 
-_LOADER = build.CompiledOnce("uvms_rac_kernel", [SOURCE], "the RAC kernel", _configure)
+_LOADER = build.CompiledOnce("uvms_rac_kernel", [KERNEL_SOURCE], "the RAC kernel", _configure)
 
 
 def library() -> ctypes.CDLL | None:
-    """The compiled kernel (built into the cache if needed), or None (:func:`unavailable_reason`
+    """The compiled kernel (built into the cache if needed), or None (:func:`kernel_unavailable_reason`
     says why). Once per process; thread-safe."""
     return _LOADER.get()
 
 
-def unavailable_reason() -> str | None:
+def kernel_unavailable_reason() -> str | None:
     """Why :func:`library` returned None (None if it was not tried or is loaded)."""
     return _LOADER.reason
 
