@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from scipy.linalg import null_space
 
-from uvms_mj.control.base import ControllerError, Measurement, available, create
+from uvms_mj.control import ControllerError, Measurement, available, create
 from uvms_mj.control.task_priority import null_space_projector, task_priority_velocity
 from uvms_mj.sim.loop import SensorModel, run_closed_loop
 from uvms_mj.control.nominal import NominalRobot

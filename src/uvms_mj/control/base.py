@@ -17,7 +17,6 @@ from __future__ import annotations
 import abc
 import math
 from dataclasses import dataclass, field
-from importlib import metadata
 from typing import Any, Callable
 
 import numpy as np
@@ -93,40 +92,6 @@ def register(name: str) -> Callable:
         return factory
 
     return deco
-
-
-def _entry_points() -> dict[str, metadata.EntryPoint]:
-    return {ep.name: ep for ep in metadata.entry_points(group=ENTRY_POINT_GROUP)}
-
-
-def available() -> list[str]:
-    """Names of the built-in and installed (entry-point) controllers."""
-    from uvms_mj.control import pd, rac, station_pid, task_priority  # noqa: F401  (registers the built-ins)
-
-    return sorted(set(_REGISTRY) | set(_entry_points()))
-
-
-def create(name: str, **kwargs: Any) -> Controller:
-    """Create a controller by name.
-
-    Raises:
-        ControllerError: unknown name (the message lists the registered controllers).
-    """
-    from uvms_mj.control import pd, rac, station_pid, task_priority  # noqa: F401
-
-    factory = _REGISTRY.get(name)
-    if factory is None:
-        ep = _entry_points().get(name)
-        if ep is None:
-            raise ControllerError(f"unknown controller {name!r}; registered: {', '.join(available())}")
-        factory = ep.load()
-    ctrl = factory(**kwargs)
-    if not getattr(ctrl, "name", ""):
-        try:  # the registry name goes into every log (a plug-in need not set it)
-            ctrl.name = name
-        except (AttributeError, TypeError):
-            pass
-    return ctrl
 
 
 # ------------------------------------------------------------------ parameter checks

@@ -9,7 +9,7 @@ from __future__ import annotations
 import difflib
 from pathlib import Path
 
-from uvms_mj.plant.params import ParameterError
+from uvms_mj.plant.errors import ParameterError
 
 __all__ = ["BUILTIN_ROBOTS", "default_model_path", "models_dir", "robot_path"]
 

@@ -22,7 +22,7 @@ from typing import Mapping
 import mujoco
 import numpy as np
 
-from uvms_mj.plant.params import ParameterError
+from uvms_mj.plant.errors import ParameterError
 from uvms_mj.physics.thrusters import thruster_actuators
 
 __all__ = ["InitialState", "Layout"]

@@ -2,7 +2,7 @@
 
 Every number here comes from ``models/uvms.xml`` (see the comments there for which come from
 the paper's Table 1 and which are our documented assumptions). This module only *reads* and
-*validates*; :func:`apply_overrides` lets a caller change a parameter in the compiled model
+*validates*; :func:`apply_planar_overrides` lets a caller change a parameter in the compiled model
 before the plant is built, with the same validation.
 
 Conventions: SI units. "Body frame" is the body's own MuJoCo frame: x along the link, y across
@@ -18,6 +18,8 @@ from typing import Any, Mapping
 import mujoco
 import numpy as np
 
+from uvms_mj.plant.errors import ParameterError  # noqa: F401  (this module's error, re-exported)
+
 # Names the plant relies on (see models/uvms.xml).
 BASE_JOINTS = ("base_x", "base_y", "base_phi")
 ARM_JOINTS = ("joint1", "joint2")
@@ -25,10 +27,6 @@ THRUSTERS = ("thruster1", "thruster2", "thruster3")
 JOINT_MOTORS = ("joint1", "joint2")
 TIP_SITE = "tip"
 HYDRO_BODIES = ("base", "link1", "link2")
-
-
-class ParameterError(ValueError):
-    """A model file or parameter that is missing, malformed or non-physical."""
 
 
 @dataclass(frozen=True)
@@ -339,7 +337,7 @@ def read_params(model: mujoco.MjModel) -> RobotParams:
 
 # --------------------------------------------------------------------------- overrides
 
-#: Keys accepted by :func:`apply_overrides`, with their meaning. BODY is base, link1 or link2.
+#: Keys accepted by :func:`apply_planar_overrides`, with their meaning. BODY is base, link1 or link2.
 OVERRIDE_KEYS = {
     "water_density": "water density rho [kg/m^3]",
     "BODY.mass": "rigid mass [kg]",
@@ -389,7 +387,7 @@ def _strips(cdx: float, cdy: float, half: np.ndarray, width: float) -> str:
     return "; ".join(parts)
 
 
-def apply_overrides(spec: mujoco.MjSpec, overrides: Mapping[str, Any]) -> None:
+def apply_planar_overrides(spec: mujoco.MjSpec, overrides: Mapping[str, Any]) -> None:
     """Change parameters of a model spec in place, before it is compiled (then
     :func:`read_params` re-validates the compiled model).
 
@@ -477,18 +475,18 @@ def apply_overrides(spec: mujoco.MjSpec, overrides: Mapping[str, Any]) -> None:
 def compile_robot(path: Any = None, overrides: Mapping[str, Any] | None = None, *,
                   native: bool | None = None) -> mujoco.MjModel:
     """Load a model file (default: the package's ``models/uvms.xml``), apply parameter
-    overrides (:func:`apply_overrides`) and compile it (C plugins when available).
+    overrides (:func:`apply_planar_overrides`) and compile it (C plugins when available).
 
     Raises:
         ParameterError: missing file, bad override, or a model that does not compile."""
     from uvms_mj.physics import model as pm
-    from uvms_mj.plant.plant import models_dir
+    from uvms_mj.plant.files import models_dir
 
     path = path if path is not None else models_dir() / "uvms.xml"
     try:
         spec = pm.load_spec(path)
         if overrides:
-            apply_overrides(spec, overrides)
+            apply_planar_overrides(spec, overrides)
         return pm.compile_spec(spec, native=native, source=str(getattr(path, "name", path)))
     except pm.ModelError as exc:
         raise ParameterError(str(exc)) from None

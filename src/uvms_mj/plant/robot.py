@@ -26,7 +26,8 @@ import mujoco
 import numpy as np
 
 from uvms_mj.plant import params as _params
-from uvms_mj.plant.params import ParameterError, read_params
+from uvms_mj.plant.errors import ParameterError
+from uvms_mj.plant.params import read_params
 from uvms_mj.physics import model as _pm
 
 __all__ = ["OVERRIDE_FIELDS", "ROLES", "Payload", "apply_model_overrides", "apply_overrides", "compile_robot_spec",
@@ -303,7 +304,7 @@ def _planar_key(key: str) -> bool:
 def apply_model_overrides(spec: mujoco.MjSpec, overrides: Mapping[str, Any]) -> None:
     """Parameter overrides of any robot, in order: on a planar robot (the paper's) the keys of
     its parameter vocabulary (:data:`uvms_mj.plant.params.OVERRIDE_KEYS`: ``base.added_mass`` =
-    [m_Ax, m_Ay, I_A], ``thrusters.tau``...) go to :func:`uvms_mj.plant.params.apply_overrides`;
+    [m_Ax, m_Ay, I_A], ``thrusters.tau``...) go to :func:`uvms_mj.plant.params.apply_planar_overrides`;
     every other key is by element name (:func:`apply_overrides`: bodies,
     joints, actuators, the water, the ``vehicle`` role, factors).
 
@@ -316,7 +317,7 @@ def apply_model_overrides(spec: mujoco.MjSpec, overrides: Mapping[str, Any]) -> 
             f = factor_of(value)
             if f is not None:
                 value = (f * _planar_value(spec, key)).tolist()
-            _params.apply_overrides(spec, {key: value})
+            _params.apply_planar_overrides(spec, {key: value})
         else:
             apply_overrides(spec, {key: value})
 

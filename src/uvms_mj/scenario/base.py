@@ -12,12 +12,16 @@ import inspect
 import math
 from typing import Annotated, Any, Callable, Iterable
 
+import copy
+from pathlib import Path
+
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
 from uvms_mj.control import ControllerError, available
+from uvms_mj.sim.loop import SensorModel
 
-__all__ = ["ScenarioError", "Outputs", "Sensors", "creation_errors"]
+__all__ = ["ScenarioError", "Outputs", "Sensors", "creation_errors", "log_path", "sensor_model"]
 
 
 class ScenarioError(ValueError):
@@ -126,12 +130,12 @@ def _out_of_range(value: Any) -> bool:
 
 
 def _factory(name: str) -> Callable:
-    from uvms_mj.control import base
+    from uvms_mj.control import base, registry
 
     available()  # registers the built-ins
     factory = base._REGISTRY.get(name)
     if factory is None:
-        factory = base._entry_points()[name].load()
+        factory = registry._entry_points()[name].load()
     return factory
 
 
@@ -243,3 +247,29 @@ def _jsonable(v: Any) -> Any:
     return repr(v)
 
 
+def _take_controller_params(sc) -> None:
+    """controller.params from ``controllers[controller.name]`` when only the latter is given;
+    both given and different is an error."""
+    own = sc.controllers.get(sc.controller.name)
+    if own is None:
+        return
+    if not sc.controller.params:
+        sc.controller.params = copy.deepcopy(own)
+    elif sc.controller.params != own:
+        raise _Issues([(("controller", "params"), f"parameters of {sc.controller.name!r} are given both here and in "
+                        f"controllers.{sc.controller.name} (differently); give them in one place",
+                        sc.controller.params)])
+
+
+def log_path(scenario) -> Path:
+    """outputs.log, or logs/<name>-<controller>.mcap."""
+    return Path(scenario.outputs.log or f"logs/{scenario.name}-{scenario.controller.name}.mcap")
+
+
+def sensor_model(scenario) -> SensorModel:
+    """The scenario's sensors as a :class:`~uvms_mj.sim.loop.SensorModel`."""
+    s = scenario.sensors
+    return SensorModel(position_noise=s.position_noise, angle_noise=s.angle_noise,
+                       attitude_noise=s.attitude_noise, joint_noise=s.joint_noise,
+                       position_quantum=s.position_quantum, angle_quantum=s.angle_quantum, delay=s.delay,
+                       velocity_sensor=s.velocity_sensor, velocity_noise=s.velocity_noise)

@@ -77,7 +77,7 @@ from uvms_mj.plant.robot import compile_robot_spec
 #: (the paper's 1/60 s is not); every controller of a robot scenario runs at it.
 DEFAULT_PERIOD = 0.02
 
-from uvms_mj.scenario import schema as _S  # noqa: E402  (the shared sections and helpers)
+from uvms_mj.scenario import base as _S  # noqa: E402  (the shared sections and helpers)
 from uvms_mj.scenario.sections import (  # noqa: E402
     CurrentSection,
     Failure,
@@ -352,7 +352,7 @@ class RobotScenario(_Section):
         issues += vehicle_issues(self.vehicle, self.controller.name, self.controller.params)
         if not issues:
             dt = self.physics.timestep or float(m.opt.timestep)
-            T = controller_period(self)
+            T = robot_controller_period(self)
             sub = T / dt
             if abs(sub - round(sub)) > 1e-9 or round(sub) < 1:
                 issues.append((("controller", "params", "T"), f"the controller period must be a whole multiple of "
@@ -386,7 +386,7 @@ def read_overrides_file(path: str, base_dir: str | None) -> dict:
     return data
 
 
-def plant_overrides(sc: "RobotScenario") -> dict:
+def robot_plant_overrides(sc: "RobotScenario") -> dict:
     """The plant's overrides: the overrides file's, then plant.overrides on top."""
     over = {}
     if sc.plant.overrides_file is not None:
@@ -426,7 +426,7 @@ def _nominal_for(path: str) -> NominalRobot:
     return _NOMINAL[path]
 
 
-def controller_period(sc: RobotScenario) -> float:
+def robot_controller_period(sc: RobotScenario) -> float:
     """controller.params.T if given, else the scenario's control_period."""
     if "T" in sc.controller.params:
         return float(sc.controller.params["T"])
@@ -448,20 +448,20 @@ def robot_info(sc: RobotScenario, plant: Plant | None = None) -> dict:
     """The run's robot for logs: {name, path, overrides, layout}."""
     path = robot_path(sc.robot, sc.base_dir)
     lay = plant.layout if plant is not None else _compiled(str(path))[1]
-    return {"name": sc.robot, "path": str(path), "overrides": _S._jsonable(plant_overrides(sc)),
+    return {"name": sc.robot, "path": str(path), "overrides": _S._jsonable(robot_plant_overrides(sc)),
             "layout": lay.describe()}
 
 
-def resolved(sc: RobotScenario) -> dict:
+def resolve_robot_scenario(sc: RobotScenario) -> dict:
     """The resolved scenario (JSON-able, for log metadata): defaults filled in (the robot's file
     is in :func:`robot_info`). It is itself a valid scenario describing the same run."""
     d = sc.model_dump(mode="json")
     d["outputs"]["log"] = _S.log_path(sc).as_posix()
-    d["controller"]["params"].setdefault("T", controller_period(sc))
+    d["controller"]["params"].setdefault("T", robot_controller_period(sc))
     return _S._jsonable(d)
 
 
-def build(sc: RobotScenario) -> tuple[Plant, Any]:
+def build_robot_scenario(sc: RobotScenario) -> tuple[Plant, Any]:
     """The plant (truth) and the controller.
 
     Raises:
@@ -470,7 +470,7 @@ def build(sc: RobotScenario) -> tuple[Plant, Any]:
     try:
         ph, pl = sc.physics, sc.plant
         plant = Plant(
-            robot_path(sc.robot, sc.base_dir), overrides=plant_overrides(sc),
+            robot_path(sc.robot, sc.base_dir), overrides=robot_plant_overrides(sc),
             terms=HydroTerms(added_mass=pl.hydro.added_mass, drag=pl.hydro.drag, buoyancy=pl.hydro.buoyancy),
             gravity=pl.gravity, current=sc.current.current(sc.seed) if sc.current is not None else pl.current,
             timestep=ph.timestep, integrator=ph.integrator,
@@ -498,12 +498,12 @@ def build(sc: RobotScenario) -> tuple[Plant, Any]:
     return plant, ctrl
 
 
-def run(sc: RobotScenario, sink=None, on_sample=None, built: tuple | None = None) -> RunResult:
+def run_robot_scenario(sc: RobotScenario, sink=None, on_sample=None, built: tuple | None = None) -> RunResult:
     """Build and run (:func:`uvms_mj.sim.loop.run_closed_loop`); ``meta`` gains ``scenario``,
     ``name``, ``backend`` and ``robot``."""
-    plant, ctrl = built if built is not None else build(sc)
-    T = float(getattr(ctrl, "T", controller_period(sc)))
+    plant, ctrl = built if built is not None else build_robot_scenario(sc)
+    T = float(getattr(ctrl, "T", robot_controller_period(sc)))
     res = run_closed_loop(plant, ctrl, sc.duration, T=T, sensor=_S.sensor_model(sc), seed=sc.seed,
                           warm_start=sc.warm_start, on_sample=on_sample, sink=sink)
-    res.meta.update(name=sc.name, backend=plant.backend, scenario=resolved(sc), robot=robot_info(sc, plant))
+    res.meta.update(name=sc.name, backend=plant.backend, scenario=resolve_robot_scenario(sc), robot=robot_info(sc, plant))
     return res

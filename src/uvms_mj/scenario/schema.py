@@ -145,6 +145,9 @@ from uvms_mj.scenario.base import (  # noqa: F401  (shared names, used here and 
     Outputs,
     ScenarioError,
     Sensors,
+    _take_controller_params,
+    log_path,
+    sensor_model,
     Vec2,
     _controller_signature,
     _factory,
@@ -305,7 +308,7 @@ def _fmt_path(loc: Sequence) -> str:
 
 # --------------------------------------------------------------------------- schema
 
-class Physics(_Section):
+class PhysicsSection(_Section):
     """MuJoCo integration settings (defaults: the model file's)."""
 
     timestep: float = Field(default_factory=_default("timestep"), ge=TIMESTEP_RANGE[0], le=TIMESTEP_RANGE[1],
@@ -416,7 +419,7 @@ class ControllerSection(_Section):
         return self
 
 
-class Trajectory(_Section):
+class TrajectorySection(_Section):
     """Straight end-tip line in the plane (:class:`uvms_mj.control.trajectories.Line3D`, z = 0)."""
 
     target: LengthVec2 | None = Field(None, description="end point, world [x, y] [m]")
@@ -445,7 +448,7 @@ class Trajectory(_Section):
         return v
 
     @model_validator(mode="after")
-    def _one_end(self) -> "Trajectory":
+    def _one_end(self) -> "TrajectorySection":
         if self.target is not None and self.displacement is not None:
             raise _Issues([((), "give exactly one of target (world [x, y]) and displacement ([dx, dy] from the "
                             "initial tip), not both", {"target": self.target, "displacement": self.displacement})])
@@ -464,13 +467,13 @@ class Scenario(_Section):
                                     "uvms_mj.scenario.robot.RobotScenario)")
     duration: float = Field(40.0, gt=0, le=DURATION_MAX, description="simulated time [s]")
     seed: int = Field(0, ge=0, le=SEED_MAX, description="random seed of the sensor noise")
-    physics: Physics = Field(default_factory=Physics)
+    physics: PhysicsSection = Field(default_factory=PhysicsSection)
     plant: PlantSection = Field(default_factory=PlantSection)
     thrusters: Thrusters = Field(default_factory=Thrusters)
     nominal: NominalSection = Field(default_factory=NominalSection)
     sensors: Sensors = Field(default_factory=Sensors)
     controller: ControllerSection = Field(default_factory=ControllerSection)
-    trajectory: Trajectory = Field(default_factory=Trajectory)
+    trajectory: TrajectorySection = Field(default_factory=TrajectorySection)
     initial: Initial = Field(default_factory=Initial, description="the initial state (default: the model's "
                              "keyframe paper_initial); joints by name (joint1, joint2)")
     current: CurrentSection | None = Field(None, description="the water current (constant, gauss_markov, profile); "
@@ -554,20 +557,6 @@ def _robot_sections_issues(sc: "Scenario") -> list:
                        _NO_VALUE))
     issues += vehicle_issues(Vehicle(setpoint=sc.vehicle.setpoint), sc.controller.name, sc.controller.params)
     return issues
-
-
-def _take_controller_params(sc) -> None:
-    """controller.params from ``controllers[controller.name]`` when only the latter is given;
-    both given and different is an error."""
-    own = sc.controllers.get(sc.controller.name)
-    if own is None:
-        return
-    if not sc.controller.params:
-        sc.controller.params = copy.deepcopy(own)
-    elif sc.controller.params != own:
-        raise _Issues([(("controller", "params"), f"parameters of {sc.controller.name!r} are given both here and in "
-                        f"controllers.{sc.controller.name} (differently); give them in one place",
-                        sc.controller.params)])
 
 
 # --------------------------------------------------------------------------- validation, loading
@@ -844,7 +833,7 @@ def controller_period(scenario: Scenario) -> float:
     if is_robot_scenario(scenario):
         from uvms_mj.scenario import robot as robot_scenario
 
-        return robot_scenario.controller_period(scenario)
+        return robot_scenario.robot_controller_period(scenario)
     params = scenario.controller.params
     if "T" in params:
         return float(params["T"])
@@ -896,11 +885,6 @@ def nominal_robot(scenario: Scenario) -> NominalRobot:
     return NominalRobot(models_dir() / "uvms.xml", scenario.nominal.overrides, gravity=scenario.nominal.gravity)
 
 
-def log_path(scenario: Scenario) -> Path:
-    """outputs.log, or logs/<name>-<controller>.mcap."""
-    return Path(scenario.outputs.log or f"logs/{scenario.name}-{scenario.controller.name}.mcap")
-
-
 def resolved(scenario: Scenario) -> dict:
     """The fully resolved scenario, JSON-serialisable (for log metadata): every default filled
     in, the drag model and log path resolved, the controller's parameters completed with the
@@ -908,7 +892,7 @@ def resolved(scenario: Scenario) -> dict:
     if is_robot_scenario(scenario):
         from uvms_mj.scenario import robot as robot_scenario
 
-        return robot_scenario.resolved(scenario)
+        return robot_scenario.resolve_robot_scenario(scenario)
     d = scenario.model_dump(mode="json")
     d["plant"]["hydro"]["drag"] = drag_model(scenario)
     d["outputs"]["log"] = log_path(scenario).as_posix()
@@ -932,7 +916,7 @@ def build(scenario: Scenario) -> tuple[Plant, Any]:
     if is_robot_scenario(scenario):
         from uvms_mj.scenario import robot as robot_scenario
 
-        return robot_scenario.build(scenario)
+        return robot_scenario.build_robot_scenario(scenario)
     try:
         ph, pl, th = scenario.physics, scenario.plant, scenario.thrusters
         plant = Plant(
@@ -1005,15 +989,6 @@ def scenario_warnings(scenario: Scenario) -> list[str]:
     return out
 
 
-def sensor_model(scenario: Scenario) -> SensorModel:
-    """The scenario's sensors as a :class:`~uvms_mj.sim.loop.SensorModel`."""
-    s = scenario.sensors
-    return SensorModel(position_noise=s.position_noise, angle_noise=s.angle_noise,
-                       attitude_noise=s.attitude_noise, joint_noise=s.joint_noise,
-                       position_quantum=s.position_quantum, angle_quantum=s.angle_quantum, delay=s.delay,
-                       velocity_sensor=s.velocity_sensor, velocity_noise=s.velocity_noise)
-
-
 def run_scenario(
     scenario: Scenario,
     sink: Callable[[float, dict], None] | None = None,
@@ -1026,7 +1001,7 @@ def run_scenario(
     if is_robot_scenario(scenario):
         from uvms_mj.scenario import robot as robot_scenario
 
-        return robot_scenario.run(scenario, sink=sink, on_sample=on_sample, built=built)
+        return robot_scenario.run_robot_scenario(scenario, sink=sink, on_sample=on_sample, built=built)
     plant, ctrl = built if built is not None else build(scenario)
     sensor = sensor_model(scenario)
     T = float(getattr(ctrl, "T", controller_period(scenario)))

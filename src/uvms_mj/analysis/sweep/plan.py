@@ -293,7 +293,7 @@ def _jsonable(v: Any) -> Any:
 
 
 def _override_value(params, key: str) -> Any:
-    """An override key's value in a RobotParams (the inverse of params.apply_overrides)."""
+    """An override key's value in a RobotParams (the inverse of params.apply_planar_overrides)."""
     if key == "water_density":
         return float(params.rho)
     head, _, fld = key.partition(".")

@@ -1,0 +1,52 @@
+"""The controllers by name: the built-ins (``rac``, ``rac_dob``, ``pd``, ``station_pid``,
+``task_priority``, registered with :func:`uvms_mj.control.base.register` when their modules are
+imported, which the functions here do on first use) and third parties' through the entry-point
+group :data:`uvms_mj.control.base.ENTRY_POINT_GROUP`.
+"""
+
+from __future__ import annotations
+
+from importlib import metadata
+from typing import Any
+
+from uvms_mj.control.base import _REGISTRY, ENTRY_POINT_GROUP, Controller, ControllerError
+
+__all__ = ["available", "create"]
+
+
+def _builtins() -> None:
+    from uvms_mj.control import pd, rac, station_pid, task_priority  # noqa: F401  (registers the built-ins)
+
+
+def _entry_points() -> dict[str, metadata.EntryPoint]:
+    return {ep.name: ep for ep in metadata.entry_points(group=ENTRY_POINT_GROUP)}
+
+
+def available() -> list[str]:
+    """Names of the built-in and installed (entry-point) controllers."""
+    _builtins()
+
+    return sorted(set(_REGISTRY) | set(_entry_points()))
+
+
+def create(name: str, **kwargs: Any) -> Controller:
+    """Create a controller by name.
+
+    Raises:
+        ControllerError: unknown name (the message lists the registered controllers).
+    """
+    _builtins()
+
+    factory = _REGISTRY.get(name)
+    if factory is None:
+        ep = _entry_points().get(name)
+        if ep is None:
+            raise ControllerError(f"unknown controller {name!r}; registered: {', '.join(available())}")
+        factory = ep.load()
+    ctrl = factory(**kwargs)
+    if not getattr(ctrl, "name", ""):
+        try:  # the registry name goes into every log (a plug-in need not set it)
+            ctrl.name = name
+        except (AttributeError, TypeError):
+            pass
+    return ctrl
