@@ -477,8 +477,8 @@ def test_base_reference_options(tmp_path):
     assert validate_scenario(resolved(sc)).controller.base_reference == "truth"  # logs re-validate
     with pytest.raises(ValueError, match="not both"):
         load_scenario(f, ["controller.base_reference=truth", "controller.params.base_reference=[0,0,0]"])
-    with pytest.raises(ValueError, match="takes no base reference"):
-        load_scenario(f, ["controller.name=pd", "controller.base_reference=truth"])
+    _, pd_ctrl = build(load_scenario(f, ["controller.name=pd", "controller.base_reference=truth"]))
+    assert np.allclose(pd_ctrl.base_reference, q0[:3])  # pd takes it too (on the generic nominal model)
 
 
 def test_delay_with_the_paper_gains_warns(cli, tmp_path):

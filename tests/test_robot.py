@@ -266,7 +266,7 @@ def test_robot_scenario_runs_deterministically():
     ({"initial": {"positon": [0, 0, 0]}}, "initial.positon: unknown key.*did you mean 'position'"),
     ({"initial": {"orientation": {"quat": [1, 0, 0, 0], "rpy": [0, 0, 0]}}}, "either quat or rpy"),
     ({"plant": {"overrides": {"bluerov2.mas": 3}}}, r"plant.overrides.bluerov2.mas: unknown field 'mas'"),
-    ({"controller": {"name": "pd"}}, "works on the paper robot only"),
+    ({"controller": {"name": "rac_planar"}}, "works on the paper robot only"),
     ({"controller": {"name": "station_pid", "params": {"kp": 1}}}, "'kp' is not a parameter"),
     ({"controller": {"name": "station_pid", "params": {"bandwidth_base": -1}}}, "bandwidth_base = -1"),
     ({"controller": {"name": "station_pid", "params": {"T": 0.015}}}, "whole multiple"),

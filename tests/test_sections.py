@@ -162,8 +162,12 @@ def test_robot_scenario_failure_and_vehicle_setpoint(tmp_path):
     np.testing.assert_allclose(q[-1, :3], [0.3, -0.2, -1.9], atol=0.01)
     yaw = 2 * math.atan2(q[-1, 6], q[-1, 3])
     assert abs(yaw - math.radians(15)) < math.radians(0.5)
-    with pytest.raises(ScenarioError, match=r"vehicle\.setpoint: controller 'pd' takes no vehicle setpoint"):
-        _load(tmp_path, "vehicle: {setpoint: {position: [0, 0, 0]}}\ncontroller: {name: pd}\n")
+    with pytest.raises(ScenarioError, match=r"vehicle\.trajectory: controller 'rac' takes no vehicle trajectory "
+                                            r"\(base_trajectory\); controllers that do: station_pid"):
+        _load(tmp_path, "robot: bluerov2_heavy\nvehicle: {trajectory: {kind: line, start: [0, 0, 0], "
+                        "target: [1, 0, 0]}}\ncontroller: {name: rac}\n")
+    with pytest.raises(ScenarioError, match=r"vehicle\.trajectory: the paper's robot takes a vehicle setpoint only"):
+        _load(tmp_path, "vehicle: {trajectory: {kind: line, start: [0, 0, 0], target: [1, 0, 0]}}\n")
     with pytest.raises(ScenarioError, match=r"thrusters\.failures\[0\]\.thruster: not a thruster"):
         _load(tmp_path, "robot: bluerov2_heavy\nthrusters: {failures: [{thruster: t99, t: 1}]}\n")
 

@@ -11,7 +11,7 @@ from typing import Any
 
 from uvms_mj.control.base import _REGISTRY, ENTRY_POINT_GROUP, Controller, ControllerError
 
-__all__ = ["available", "create"]
+__all__ = ["available", "create", "factory"]
 
 
 def _builtins() -> None:
@@ -29,21 +29,28 @@ def available() -> list[str]:
     return sorted(set(_REGISTRY) | set(_entry_points()))
 
 
+def factory(name: str):
+    """The class (or factory) registered as ``name``.
+
+    Raises:
+        ControllerError: unknown name (the message lists the registered controllers)."""
+    _builtins()
+    f = _REGISTRY.get(name)
+    if f is None:
+        ep = _entry_points().get(name)
+        if ep is None:
+            raise ControllerError(f"unknown controller {name!r}; registered: {', '.join(available())}")
+        f = ep.load()
+    return f
+
+
 def create(name: str, **kwargs: Any) -> Controller:
     """Create a controller by name.
 
     Raises:
         ControllerError: unknown name (the message lists the registered controllers).
     """
-    _builtins()
-
-    factory = _REGISTRY.get(name)
-    if factory is None:
-        ep = _entry_points().get(name)
-        if ep is None:
-            raise ControllerError(f"unknown controller {name!r}; registered: {', '.join(available())}")
-        factory = ep.load()
-    ctrl = factory(**kwargs)
+    ctrl = factory(name)(**kwargs)
     if not getattr(ctrl, "name", ""):
         try:  # the registry name goes into every log (a plug-in need not set it)
             ctrl.name = name

@@ -130,13 +130,9 @@ def _out_of_range(value: Any) -> bool:
 
 
 def _factory(name: str) -> Callable:
-    from uvms_mj.control import base, registry
+    from uvms_mj.control.registry import factory
 
-    available()  # registers the built-ins
-    factory = base._REGISTRY.get(name)
-    if factory is None:
-        factory = registry._entry_points()[name].load()
-    return factory
+    return factory(name)
 
 
 def _controller_signature(name: str) -> tuple[dict[str, inspect.Parameter], bool]:

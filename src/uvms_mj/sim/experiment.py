@@ -18,11 +18,13 @@ motivated, documented, never tuned on the result):
 
 from __future__ import annotations
 
+import inspect
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from uvms_mj.control import create
+from uvms_mj.control.registry import factory
 from uvms_mj.control.digital import PAPER_GAINS, PAPER_JS, PAPER_T, PAPER_TF
 from uvms_mj.control.rac import paper_nominal_robot
 from uvms_mj.control.trajectories import Line3D
@@ -84,6 +86,9 @@ class PaperExperiment:
         path = Line3D(start=(*start.tolist(), 0.0), target=(*target.tolist(), 0.0),
                       cruise_speed=self.cruise_speed, accel=self.cruise_speed)
         params = dict(T=PAPER_T, gamma=PAPER_GAINS, lam=PAPER_GAINS, js=PAPER_JS, tf=PAPER_TF)
+        sig = inspect.signature(factory(self.controller)).parameters
+        var_kw = any(p.kind == p.VAR_KEYWORD for p in sig.values())
+        params = {k: v for k, v in params.items() if var_kw or k in sig}  # Section 4's, where they apply
         params.update(self.controller_params)
         ctrl = create(self.controller, trajectory=path, robot=robot, **params)
         return plant, ctrl
