@@ -194,3 +194,15 @@ def test_validate_resolved_prints_a_valid_scenario(tmp_path):
     second = run(again)
     assert second.returncode == 0, second.stderr
     assert yaml.safe_load(second.stdout) == data
+
+
+def test_a_section_of_the_other_robot_kind_says_so(tmp_path):
+    """One schema for every robot: a key the paper's robot does not take but an MJCF robot does
+    (and the other way round) is named as such, not as an unknown key."""
+    with pytest.raises(ScenarioError, match=r"arm: 'arm' applies to MJCF robots .*not to the paper's robot"):
+        _load(tmp_path, "arm: {waypoints: []}\n")
+    with pytest.raises(ScenarioError, match=r"plant\.model_mismatch: 'model_mismatch' applies to the paper's robot "
+                                            r"\(robot: paper\) only"):
+        _load(tmp_path, "robot: bluerov2_heavy\nplant: {model_mismatch: true}\n")
+    with pytest.raises(ScenarioError, match=r"arms: unknown key 'arms' \(did you mean 'arm'\?\)"):
+        _load(tmp_path, "robot: bluerov2_heavy\narms: {}\n")

@@ -48,7 +48,8 @@ from typing import Any, Mapping, Sequence
 import mujoco
 import numpy as np
 
-from uvms_mj.physics.terms import BACKENDS, HydroTerms, default_backend
+from uvms_mj.physics.terms import HydroTerms
+from uvms_mj.plant.setup import resolve_backend, set_integration, water_terms
 from uvms_mj.plant import params as _params
 from uvms_mj.plant.files import default_model_path, models_dir, robot_path  # noqa: F401  (re-exported)
 from uvms_mj.plant.layout import InitialState, Layout
@@ -62,61 +63,14 @@ from uvms_mj.plant.stepping import (  # noqa: F401  (DivergenceError, Energy, mu
     install_mujoco_warning_handler,
     mujoco_warnings,
 )
-from uvms_mj.physics import build as _build
 from uvms_mj.physics import model as _pm
 from uvms_mj.physics import python_backend as _pyb
 from uvms_mj.physics.current import Current
 from uvms_mj.physics.thrusters import CurveInverse, thruster_curves
 
-__all__ = ["DivergenceError", "Energy", "Plant", "ThrusterFailure", "set_integration", "water_terms"]
+__all__ = ["DivergenceError", "Energy", "Plant", "ThrusterFailure"]
 
 _RESET_TO_INITIAL = object()  # Plant.reset's default: the plant's initial state
-
-
-def _resolve_backend(requested: str | None, terms: HydroTerms) -> bool:
-    """Whether to use the native (C plugin) backend for the requested one."""
-    if requested is None:
-        requested = default_backend()  # UVMS_MJ_COMPILED; a bad value raises CompiledModeError
-    if requested not in BACKENDS:
-        raise ParameterError(f"backend = {requested!r}; allowed: {', '.join(BACKENDS)}")
-    if requested == "python" or terms.added_mass == "lagged":  # lagged exists only in Python
-        return False
-    if requested == "native":
-        if not _build.register_plugins():
-            raise _build.PluginUnavailableError(f"backend 'native': {_build.unavailable_reason()}")
-        return True
-    return _build.register_plugins()
-
-
-def water_terms(terms: HydroTerms) -> str:
-    """The ``uvms.water`` ``terms`` word list for :class:`HydroTerms` (damping and
-    Froude-Krylov always on)."""
-    words = ["damping", "froude_krylov"]
-    if terms.added_mass != "off":
-        words.append("added_mass")
-    if terms.drag == "strip":
-        words.append("strips")
-    if terms.buoyancy:
-        words.append("buoyancy")
-    return " ".join(sorted(words))
-
-
-def set_integration(m: mujoco.MjModel, timestep: float | None, integrator: str | None) -> None:
-    """Override a compiled model's timestep [s] and integrator (by name, e.g. "rk4"); None keeps
-    the model's.
-
-    Raises:
-        ParameterError: a timestep that is not finite and > 0, an unknown integrator name."""
-    if timestep is not None:
-        if not (math.isfinite(timestep) and timestep > 0):
-            raise ParameterError(f"timestep = {timestep!r} s must be finite and > 0")
-        m.opt.timestep = timestep
-    if integrator is not None:
-        names = {k.removeprefix("mjINT_").lower(): v for k, v in mujoco.mjtIntegrator.__members__.items()}
-        key = integrator.lower()
-        if key not in names:
-            raise ParameterError(f"integrator = {integrator!r}; allowed: {', '.join(names)}")
-        m.opt.integrator = names[key]
 
 
 
@@ -200,7 +154,7 @@ class Plant(Stepping):
             raise ParameterError(f"payload = {payload!r}: mass must be > 0 and t >= 0")
         if initial is not None and not isinstance(initial, InitialState):
             raise ParameterError(f"initial = {initial!r} must be an InitialState")
-        native = _resolve_backend(backend, terms)
+        native = resolve_backend(backend, terms)
         if isinstance(current, Current):
             water = current.attributes()
             wind = np.asarray(current.velocity, dtype=float)

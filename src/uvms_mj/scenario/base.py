@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, field_validator, model_validator
 
-from uvms_mj.control import ControllerError, available
+from uvms_mj.control import ControllerError
 from uvms_mj.sim.loop import SensorModel
 
 __all__ = ["ScenarioError", "Outputs", "Sensors", "creation_errors", "log_path", "sensor_model"]
