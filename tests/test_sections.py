@@ -206,3 +206,20 @@ def test_a_section_of_the_other_robot_kind_says_so(tmp_path):
         _load(tmp_path, "robot: bluerov2_heavy\nplant: {model_mismatch: true}\n")
     with pytest.raises(ScenarioError, match=r"arms: unknown key 'arms' \(did you mean 'arm'\?\)"):
         _load(tmp_path, "robot: bluerov2_heavy\narms: {}\n")
+
+
+def test_a_retired_controller_names_its_replacement(tmp_path):
+    """A file valid before the planar closed form became a test oracle (controller rac_planar)
+    fails with one line naming the controller to use instead (in a process of its own: the test
+    suite registers the oracle)."""
+    import subprocess
+    import sys
+
+    f = tmp_path / "old.yaml"
+    f.write_text("controller: {name: rac_dob_planar}\n")
+    out = subprocess.run([sys.executable, "-m", "uvms_mj.cli.main", "validate", str(f)], capture_output=True,
+                         text=True)
+    assert out.returncode == 2
+    assert ("controller.name: controller 'rac_dob_planar' is no longer shipped (the planar closed form is a test "
+            "oracle now): use 'rac_dob'") in out.stderr
+    assert "Traceback" not in out.stderr

@@ -11,7 +11,26 @@ from typing import Any
 
 from uvms_mj.control.base import _REGISTRY, ENTRY_POINT_GROUP, Controller, ControllerError
 
-__all__ = ["available", "create", "factory"]
+__all__ = ["RETIRED", "available", "create", "factory", "unknown_message"]
+
+#: Controller names that no longer exist in the product -> the one to use instead (the planar
+#: closed-form RAC of the first reproduction is a test oracle since issue 18; ``rac`` / ``rac_dob``
+#: give the same run on the paper's robot, to 1e-12).
+RETIRED = {"rac_planar": "rac", "rac_dob_planar": "rac_dob"}
+
+
+def unknown_message(name: str) -> str:
+    """Why ``name`` is not a controller, in one line: a retired name and what replaces it, or
+    the registered names (with a did-you-mean)."""
+    import difflib
+
+    if name in RETIRED:
+        return (f"controller {name!r} is no longer shipped (the planar closed form is a test oracle now): use "
+                f"{RETIRED[name]!r}, which gives the same run on the paper's robot")
+    names = available()
+    close = difflib.get_close_matches(str(name), names, n=1, cutoff=0.6)
+    hint = f" (did you mean {close[0]!r}?)" if close else ""
+    return f"unknown controller {name!r}{hint}; registered: {', '.join(names)}"
 
 
 def _builtins() -> None:
@@ -39,7 +58,7 @@ def factory(name: str):
     if f is None:
         ep = _entry_points().get(name)
         if ep is None:
-            raise ControllerError(f"unknown controller {name!r}; registered: {', '.join(available())}")
+            raise ControllerError(unknown_message(name))
         f = ep.load()
     return f
 

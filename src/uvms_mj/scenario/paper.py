@@ -374,7 +374,9 @@ class ControllerSection(_Section):
     def _name(cls, v: str) -> str:
         names = available()
         if v not in names:
-            raise ValueError(f"unknown controller {v!r}{_suggest(v, names)}; registered: {', '.join(names)}")
+            from uvms_mj.control.registry import unknown_message
+
+            raise ValueError(unknown_message(v))
         return v
 
     @model_validator(mode="after")
@@ -466,7 +468,9 @@ class Scenario(_Section):
         names = available()
         for name, params in v.items():
             if name not in names:
-                issues.append(((name,), f"unknown controller{_suggest(name, names)}; registered: {', '.join(names)}",
+                from uvms_mj.control.registry import unknown_message
+
+                issues.append(((name,), unknown_message(name).replace(f"controller {name!r}", "controller", 1),
                                _NO_VALUE))
             elif not isinstance(params, dict):
                 issues.append(((name,), "must be a mapping of parameter names to values", params))

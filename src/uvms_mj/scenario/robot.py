@@ -338,8 +338,11 @@ class RobotScenario(_Section):
         c = self.controller
         allowed = floating_controllers()
         if c.name not in available():
-            issues.append((("controller", "name"), f"unknown controller{_suggest(c.name, available())}; for "
-                           f"floating robots: {', '.join(allowed)}", c.name))
+            from uvms_mj.control.registry import RETIRED, unknown_message
+
+            issues.append((("controller", "name"), unknown_message(c.name) if c.name in RETIRED else
+                           f"unknown controller{_suggest(c.name, available())}; for floating robots: "
+                           f"{', '.join(allowed)}", c.name))
         elif c.name not in allowed:
             issues.append((("controller", "name"), f"works on the paper robot only; for floating robots: "
                            f"{', '.join(allowed)}", c.name))
