@@ -170,6 +170,36 @@ def creation_errors(make: Callable[[dict], Any], params: dict) -> list[tuple[tup
     return issues or [((), err, params)]
 
 
+class SignalSection(_Section):
+    """One measured signal (:class:`uvms_mj.sim.sensors.Signal`): noise, bias, quantization, rate,
+    delay in samples or seconds."""
+
+    noise: float = Field(0.0, ge=0, le=10.0, description="std (the signal's units: m, rad, m/s or rad/s)")
+    bias: float | list[float] | None = Field(None, description="constant offset: one number or one per component")
+    quantum: float = Field(0.0, ge=0, le=1.0, description="quantization step, 0: none")
+    rate: float | None = Field(None, gt=0, le=10_000.0, description="refresh rate [Hz]; null: every control sample")
+    delay: int | None = Field(None, ge=0, le=1000, description="delay [control samples]")
+    delay_s: float | None = Field(None, ge=0, le=100.0, description="delay [s] (a whole number of control periods)")
+
+    @model_validator(mode="after")
+    def _one_delay(self) -> "SignalSection":
+        if self.delay is not None and self.delay_s is not None:
+            raise _Issues([((), "give the delay in samples (delay) or in seconds (delay_s), not both",
+                            {"delay": self.delay, "delay_s": self.delay_s})])
+        return self
+
+    def signal(self):
+        from uvms_mj.sim.sensors import Signal
+
+        bias = () if self.bias is None else self.bias
+        return Signal(noise=self.noise, bias=bias, quantum=self.quantum, rate=self.rate, delay=self.delay,
+                      delay_s=self.delay_s)
+
+
+#: The per-signal sections of ``sensors`` (:data:`uvms_mj.sim.sensors.SIGNALS`).
+SIGNAL_FIELDS = ("position", "attitude", "joints", "velocity")
+
+
 class Sensors(_Section):
     """The measurement model (:class:`uvms_mj.sim.loop.SensorModel`; all off by default)."""
 
@@ -185,10 +215,24 @@ class Sensors(_Section):
     delay: int = Field(0, ge=0, le=1, description="samples of measurement delay: 0 or 1")
     velocity_sensor: bool = False
     velocity_noise: float = Field(0.0, ge=0, le=VELOCITY_NOISE_MAX, description="std [m/s, rad/s] (with velocity_sensor)")
+    position: SignalSection | None = Field(None, description="per signal: the base/vehicle position (world)")
+    attitude: SignalSection | None = Field(None, description="per signal: the base/vehicle attitude")
+    joints: SignalSection | None = Field(None, description="per signal: the joint encoders")
+    velocity: SignalSection | None = Field(None, description="per signal: a velocity sensor (qvel)")
+
+    def signal_sections(self) -> dict:
+        """The per-signal sections given (name -> SignalSection)."""
+        return {n: getattr(self, n) for n in SIGNAL_FIELDS if getattr(self, n) is not None}
 
     @model_validator(mode="after")
     def _tiny(self) -> "Sensors":
         issues = []
+        if self.signal_sections():
+            flat = [k for k in ("position_noise", "angle_noise", "attitude_noise", "joint_noise", "position_quantum",
+                                "angle_quantum", "delay", "velocity_sensor", "velocity_noise") if getattr(self, k)]
+            if flat:
+                issues.append(((flat[0],), "give either the per-signal sections (position, attitude, joints, "
+                               "velocity) or the flat fields, not both", getattr(self, flat[0])))
         for key in ("position_noise", "angle_noise", "attitude_noise", "joint_noise", "position_quantum",
                     "angle_quantum", "velocity_noise"):
             v = getattr(self, key)
@@ -257,14 +301,33 @@ def _take_controller_params(sc) -> None:
                         sc.controller.params)])
 
 
+def sensor_issues(sensors, T: float) -> list:
+    """Problems of the per-signal sensors with the control period T [s] (rates and delays in
+    seconds must be whole numbers of periods)."""
+    from uvms_mj.sim.sensors import samples_of
+
+    issues = []
+    for name, sec in sensors.signal_sections().items():
+        try:
+            samples_of(sec.signal(), T)
+        except ValueError as exc:
+            key = "rate" if str(exc).startswith("rate") else "delay_s"
+            issues.append((("sensors", name, key), str(exc).split(": ", 1)[-1], getattr(sec, key)))
+    return issues
+
+
 def log_path(scenario) -> Path:
     """outputs.log, or logs/<name>-<controller>.mcap."""
     return Path(scenario.outputs.log or f"logs/{scenario.name}-{scenario.controller.name}.mcap")
 
 
 def sensor_model(scenario) -> SensorModel:
-    """The scenario's sensors as a :class:`~uvms_mj.sim.loop.SensorModel`."""
+    """The scenario's sensors as a :class:`~uvms_mj.sim.loop.SensorModel` (per-signal sensors
+    when the section has any)."""
     s = scenario.sensors
+    sections = s.signal_sections()
+    if sections:
+        return SensorModel(signals={n: sec.signal() for n, sec in sections.items()})
     return SensorModel(position_noise=s.position_noise, angle_noise=s.angle_noise,
                        attitude_noise=s.attitude_noise, joint_noise=s.joint_noise,
                        position_quantum=s.position_quantum, angle_quantum=s.angle_quantum, delay=s.delay,

@@ -117,6 +117,7 @@ from uvms_mj.plant.params import (
 from uvms_mj.plant.plant import default_model_path, models_dir
 from uvms_mj.scenario.sections import CurrentSection, Failure, Initial, Vehicle, vehicle_issues
 from uvms_mj.scenario.base import (  # noqa: F401  (shared names, used here and by uvms_mj.scenario.robot)
+    sensor_issues,
     _NO_VALUE,
     ACCEL_MAX,
     CURRENT_MAX,
@@ -501,7 +502,7 @@ class Scenario(_Section):
                             f"unstable with the {self.physics.integrator} integrator at physics.timestep = "
                             f"{dt:.6g} s: the lag integrates stably only for tau > timestep / {bound} = "
                             f"{dt / bound:.6g} s", tau)])
-        issues = _robot_sections_issues(self)
+        issues = _robot_sections_issues(self) + sensor_issues(self.sensors, T)
         if issues:
             raise _Issues(issues)
         return self

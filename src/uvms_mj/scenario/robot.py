@@ -360,6 +360,7 @@ class RobotScenario(_Section):
             if abs(sub - round(sub)) > 1e-9 or round(sub) < 1:
                 issues.append((("controller", "params", "T"), f"the controller period must be a whole multiple of "
                                f"the timestep {dt!r} s", T))
+            issues += _S.sensor_issues(self.sensors, T)
         if issues:
             raise _Issues(issues)
         return self

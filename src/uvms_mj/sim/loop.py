@@ -12,13 +12,14 @@ from __future__ import annotations
 import math
 import operator
 from dataclasses import dataclass, field
-from typing import Callable
+from typing import Callable, Mapping
 
 import numpy as np
 
 from uvms_mj.control.base import Command, Controller, Measurement
 from uvms_mj.plant.plant import DivergenceError, Plant, mujoco_warnings
 from uvms_mj.rotations import quat_from_rotvec, quat_mul
+from uvms_mj.sim.sensors import Signal, SignalSensors
 
 
 #: A thrust or joint-torque command beyond this [N, N m] is taken as divergence of the
@@ -39,6 +40,9 @@ class SensorModel:
         delay: samples of measurement/computation delay (0 or 1).
         velocity_sensor: give the controller the true velocities (plus velocity_noise).
         velocity_noise: std of Gaussian noise on the measured velocities [m/s, rad/s].
+        signals: per-signal sensors instead of the fields above (:mod:`uvms_mj.sim.sensors`:
+            ``{"position": Signal(...), "attitude": ..., "joints": ..., "velocity": ...}``, each
+            with its noise, bias, quantization, rate and delay); None: the fields above.
     """
 
     position_noise: float = 0.0
@@ -50,6 +54,7 @@ class SensorModel:
     velocity_noise: float = 0.0
     attitude_noise: float | None = None
     joint_noise: float | None = None
+    signals: Mapping[str, Signal] | None = None
 
     def __post_init__(self) -> None:
         for name in ("position_noise", "angle_noise", "position_quantum", "angle_quantum", "velocity_noise",
@@ -61,6 +66,12 @@ class SensorModel:
                 raise ValueError(f"sensor.{name} = {v!r} must be finite and >= 0")
         if self.delay not in (0, 1):
             raise ValueError(f"sensor.delay = {self.delay!r}; allowed: 0, 1 (samples)")
+        if self.signals:
+            flat = [name for name in ("position_noise", "angle_noise", "position_quantum", "angle_quantum", "delay",
+                                      "velocity_sensor", "velocity_noise", "attitude_noise", "joint_noise")
+                    if getattr(self, name)]
+            if flat:
+                raise ValueError(f"sensor: give either the per-signal sensors (signals) or {', '.join(flat)}, not both")
 
 
 @dataclass
@@ -195,8 +206,13 @@ def run_closed_loop(
     if layout is not None and not layout.base_free:
         layout = None  # a planar base (the paper's): the planar measurement below
 
+    per_signal = SignalSensors(sensor.signals, T, seed, plant.layout) if sensor.signals else None
+
     def measure(k: int, q_true: np.ndarray, qd_true: np.ndarray) -> Measurement:
         nonlocal q_prev_meas
+        if per_signal is not None:
+            q, qd = per_signal.measure(k, q_true, qd_true)
+            return Measurement(k=k, t=k * T, q=q, qd=qd)
         if layout is not None:
             q, qd = measure_robot(plant, layout, sensor, rng, q_true, qd_true)
             if sensor.delay:
@@ -219,7 +235,8 @@ def run_closed_loop(
         return Measurement(k=k, t=k * T, q=q, qd=qd)
 
     on_event = getattr(plant, "on_sample", None)  # scheduled plant events (e.g. a payload pick-up)
-    exact = layout is None and not (noisy or quantized or sensor.velocity_sensor or sensor.delay)  # q = q_true
+    exact = layout is None and per_signal is None and not (noisy or quantized or sensor.velocity_sensor
+                                                          or sensor.delay)  # q = q_true
     # the state at each sample: observed once, then read by each step (Plant.step_observe: the
     # compiled sample where it can); the thrust read after the commands where it follows them
     state = _observe(plant)
