@@ -102,7 +102,9 @@ def test_defaults_are_the_paper_experiment():
     assert tuple(sc.trajectory.displacement) == PAPER_TIP_DISPLACEMENT and sc.trajectory.target is None
     assert sc.trajectory.cruise_speed == sc.trajectory.accel == pe.cruise_speed
     assert sc.plant.model_mismatch is pe.truth and sc.plant.overrides == pe.plant_overrides
-    assert {f.name: getattr(pe.sensor, f.name) for f in fields(SensorModel)} == sc.sensors.model_dump()
+    flat = {k: v for k, v in sc.sensors.model_dump().items() if k not in ("position", "attitude", "joints", "velocity")}
+    assert {f.name: getattr(pe.sensor, f.name) for f in fields(SensorModel) if f.name != "signals"} == flat
+    assert pe.sensor.signals is None and not sc.sensors.signal_sections()  # the per-signal sensors: off
     plant = Plant()
     assert sc.physics.timestep == plant.model.opt.timestep == 1 / 120
     assert sc.physics.integrator == "rk4"
@@ -216,7 +218,7 @@ def test_unknown_key_with_did_you_mean(tmp_path):
     msg = error_of(tmp_path, "controller:\n  params: {gama: 0.3}\n")
     assert "controller.params.gama" in msg and "did you mean 'gamma'" in msg
     msg = error_of(tmp_path, "plant:\n  overrides: {base.volum: 0.03}\n")
-    assert "plant.overrides.base.volum" in msg and "did you mean 'base.volume'" in msg
+    assert "plant.overrides.base.volum" in msg and "unknown field 'volum' for body 'base' (did you mean 'volume'?)" in msg
 
 
 def test_wrong_type(tmp_path):

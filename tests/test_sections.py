@@ -223,3 +223,32 @@ def test_a_retired_controller_names_its_replacement(tmp_path):
     assert ("controller.name: controller 'rac_dob_planar' is no longer shipped (the planar closed form is a test "
             "oracle now): use 'rac_dob'") in out.stderr
     assert "Traceback" not in out.stderr
+
+
+def test_paper_scenario_overrides_by_name_role_and_factor_and_a_payload(tmp_path):
+    """The paper's robot takes the overrides every robot takes (element names, the vehicle role,
+    factors) beside its own keys, and a payload: the compiled plant has the model file's values
+    times the factors, and the payload's mass appears at its time (MuJoCo's body mass)."""
+    sc = _load(tmp_path, """
+        duration: 1.0
+        plant:
+          model_mismatch: false
+          overrides: {vehicle.volume: x1.01, joint1.damping: 0.05, link1.mass: x1.1}
+          payload: {mass: 0.4, t: 0.5}
+        nominal:
+          overrides: {link2.added_mass: x1.3}
+    """)
+    plant, ctrl = build(sc)
+    ref = Plant()
+    assert plant.params.body("base").volume == pytest.approx(1.01 * ref.params.body("base").volume, rel=1e-15)
+    assert plant.params.body("link1").mass == pytest.approx(1.1 * ref.params.body("link1").mass, rel=1e-15)
+    j = mujoco.mj_name2id(plant.model, mujoco.mjtObj.mjOBJ_JOINT, "joint1")
+    assert plant.model.dof_damping[plant.model.jnt_dofadr[j]] == 0.05
+    from uvms_mj.plant.params import read_params
+
+    nom, file = read_params(ctrl.robot.model).body("link2"), ref.params.body("link2")
+    np.testing.assert_allclose(nom.added_mass, 1.3 * np.array(file.added_mass), rtol=1e-15)
+    res = run_scenario(sc, built=(plant, ctrl))
+    assert res.status == "ok"
+    b = mujoco.mj_name2id(plant.model, mujoco.mjtObj.mjOBJ_BODY, "payload")
+    assert plant.model.body_mass[b] == 0.4

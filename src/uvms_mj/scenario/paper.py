@@ -115,7 +115,7 @@ from uvms_mj.plant.params import (
     read_params,
 )
 from uvms_mj.plant.plant import default_model_path, models_dir
-from uvms_mj.scenario.sections import CurrentSection, Failure, Initial, Vehicle, vehicle_issues
+from uvms_mj.scenario.sections import CurrentSection, Failure, Initial, PayloadSection, Vehicle, vehicle_issues
 from uvms_mj.scenario.base import (  # noqa: F401  (shared names, used here and by uvms_mj.scenario.robot)
     sensor_issues,
     _NO_VALUE,
@@ -196,35 +196,53 @@ OVERRIDE_NAMES: tuple[str, ...] = tuple(
 
 
 def _check_overrides(overrides: dict, allow_thrusters: bool) -> list[tuple[tuple, str, Any]]:
-    """Each override key is known and its value valid on its own (applied to a copy of the
-    model, then re-read with read_params' physical checks)."""
+    """Each override is valid on its own (applied to a copy of the model file, then re-read
+    with read_params' physical checks): a key of the paper robot's vocabulary (OVERRIDE_KEYS:
+    ``base.added_mass`` = [m_Ax, m_Ay, I_A], ...) or any element by name
+    (:func:`uvms_mj.plant.robot.apply_overrides`: ``joint1.damping``, the ``vehicle`` role), a
+    value absolute or a factor ``"x1.3"``."""
+    from uvms_mj.plant.robot import compile_robot_spec, factor_of
+
     issues = []
     for key, value in overrides.items():
-        if not isinstance(key, str) or key not in OVERRIDE_NAMES:
-            issues.append(((key,), f"unknown parameter {key!r}{_suggest(key, OVERRIDE_NAMES)}; allowed: "
-                           + ", ".join(k.replace("BODY", "{" + ",".join(HYDRO_BODIES) + "}") for k in OVERRIDE_KEYS),
-                           _NO_VALUE))
+        if not isinstance(key, str):
+            issues.append(((key,), "an override key is '<element>.<field>' or a key of the paper robot's "
+                           "parameters", _NO_VALUE))
             continue
-        if not allow_thrusters and key.startswith("thrusters."):
+        planar = key in OVERRIDE_NAMES
+        if planar and not allow_thrusters and key.startswith("thrusters."):
             field = key.partition(".")[2]
             field = "dead_zone_band" if field == "dead_zone" else field
             issues.append(((key,), f"set the plant's thrusters in the thrusters section (thrusters.{field})", value))
             continue
-        ok = _is_number(value) or (isinstance(value, list) and value and all(_is_number(v) for v in value))
-        if not ok:
-            issues.append(((key,), f"must be a number or a list of numbers ({OVERRIDE_KEYS[_generic(key)]})", value))
-            continue
-        if _non_finite(value):
-            issues.append(((key,), "must be finite", value))
-            continue
-        if _out_of_range(value):
-            issues.append(((key,), f"numbers must be 0 or within {SIZE_MIN:g} to {PARAM_ABS_MAX:g} in magnitude",
-                           value))
-            continue
         try:
-            read_params(compile_robot(models_dir() / "uvms.xml", {key: value}))
+            is_factor = factor_of(value) is not None
         except ParameterError as exc:
-            issues.append(((key,), f"{exc} ({OVERRIDE_KEYS[_generic(key)]})", value))
+            issues.append(((key,), str(exc), _NO_VALUE))
+            continue
+        what = OVERRIDE_KEYS[_generic(key)] if planar else "see uvms_mj.plant.robot.OVERRIDE_FIELDS"
+        if not is_factor:
+            ok = _is_number(value) or (isinstance(value, list) and value and all(_is_number(v) for v in value))
+            if not ok:
+                issues.append(((key,), f"must be a number, a list of numbers or a factor 'x1.3' ({what})", value))
+                continue
+            if _non_finite(value):
+                issues.append(((key,), "must be finite", value))
+                continue
+            if _out_of_range(value):
+                issues.append(((key,), f"numbers must be 0 or within {SIZE_MIN:g} to {PARAM_ABS_MAX:g} in magnitude",
+                               value))
+                continue
+        try:
+            read_params(compile_robot_spec(models_dir() / "uvms.xml", {key: value}))
+        except ParameterError as exc:
+            msg = str(exc)
+            if "the model has no body, joint or actuator named" in msg:
+                msg += ("; or a key of the paper robot's parameters: "
+                        + ", ".join(k.replace("BODY", "{" + ",".join(HYDRO_BODIES) + "}") for k in OVERRIDE_KEYS))
+                issues.append(((key,), msg, _NO_VALUE))
+            else:
+                issues.append(((key,), f"{msg} ({what})", value))
     return issues
 
 
@@ -313,6 +331,7 @@ class PlantSection(_Section):
     current: Annotated[list[Annotated[float, Field(ge=-CURRENT_MAX, le=CURRENT_MAX)]],
                        Field(min_length=2, max_length=2)] = Field(
         default_factory=lambda: [0.0, 0.0], description="world [vx, vy] [m/s]")
+    payload: PayloadSection | None = Field(None, description="a payload picked up during the run (at the tip)")
 
     @field_validator("overrides")
     @classmethod

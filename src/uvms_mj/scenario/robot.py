@@ -81,6 +81,7 @@ from uvms_mj.scenario import base as _S  # noqa: E402  (the shared sections and 
 from uvms_mj.scenario.sections import (  # noqa: E402
     CurrentSection,
     Failure,
+    PayloadSection,
     Initial,
     Vehicle,
     vehicle_issues,
@@ -128,25 +129,6 @@ class Arm(_Section):
                 raise _Issues([(("waypoints", i, "t"), f"times must be strictly increasing (previous {last:g} s)", w.t)])
             last = w.t
         return self
-
-
-class PayloadSection(_Section):
-    """A payload picked up during the run (:class:`uvms_mj.plant.robot.Payload`), unknown to the
-    nominal model."""
-
-    mass: float = Field(gt=0, le=1000.0, description="[kg]")
-    t: float = Field(0.0, ge=0, le=_S.DURATION_MAX, description="pick-up time [s]")
-    site: str | None = Field(None, description="site it is welded to; null: the tip site")
-    offset: Annotated[list[float], Field(min_length=3, max_length=3)] = Field(
-        default_factory=lambda: [0.0, 0.0, 0.0], description="centre in the site frame [m]")
-    radius: float = Field(0.02, gt=0, le=1.0, description="for its inertia (solid sphere) [m]")
-    volume: float = Field(0.0, ge=0, le=1.0, description="displaced volume [m^3]")
-
-    def payload(self):
-        from uvms_mj.plant.robot import Payload
-
-        return Payload(mass=self.mass, t=self.t, site=self.site, offset=tuple(self.offset), radius=self.radius,
-                       volume=self.volume)
 
 
 class RobotHydro(_Section):

@@ -413,7 +413,9 @@ def nominal_params(scenario: Scenario) -> RobotParams:
     """The controller's parameters: the robot model FILE plus nominal.overrides (never the plant)."""
     if not scenario.nominal.overrides:
         return read_params(_robot_file_model())
-    return read_params(compile_robot(models_dir() / "uvms.xml", scenario.nominal.overrides))
+    from uvms_mj.plant.robot import compile_robot_spec
+
+    return read_params(compile_robot_spec(models_dir() / "uvms.xml", scenario.nominal.overrides))
 
 
 def nominal_robot(scenario: Scenario) -> NominalRobot:
@@ -468,6 +470,7 @@ def build(scenario: Scenario) -> tuple[Plant, Any]:
             backend=None if ph.backend == "auto" else ph.backend,
             initial=scenario.initial.state(),
             failures=[f.failure() for f in th.failures],
+            payload=pl.payload.payload() if pl.payload is not None else None,
         )
         robot = nominal_robot(scenario)
         tr = scenario.trajectory

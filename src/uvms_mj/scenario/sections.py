@@ -21,7 +21,7 @@ from uvms_mj.rotations import quat_from_rpy
 from uvms_mj.scenario.base import _NO_VALUE as _NO
 from uvms_mj.scenario.base import CURRENT_MAX, DURATION_MAX, SEED_MAX, _Issues, _Section
 
-__all__ = ["CurrentSection", "Failure", "Initial", "Orientation", "Setpoint", "Vehicle"]
+__all__ = ["CurrentSection", "Failure", "Initial", "Orientation", "PayloadSection", "Setpoint", "Vehicle"]
 
 #: Bounds (as the paper scenario's).
 POSITION_MAX = 1000.0  # [m] |initial.position|, |vehicle.setpoint.position|
@@ -142,6 +142,25 @@ class Failure(_Section):
 
     def failure(self) -> ThrusterFailure:
         return ThrusterFailure(thruster=self.thruster, t=float(self.t))
+
+
+class PayloadSection(_Section):
+    """A payload picked up during the run (:class:`uvms_mj.plant.robot.Payload`), unknown to the
+    nominal model."""
+
+    mass: float = Field(gt=0, le=1000.0, description="[kg]")
+    t: float = Field(0.0, ge=0, le=DURATION_MAX, description="pick-up time [s]")
+    site: str | None = Field(None, description="site it is welded to; null: the tip site")
+    offset: Annotated[list[float], Field(min_length=3, max_length=3)] = Field(
+        default_factory=lambda: [0.0, 0.0, 0.0], description="centre in the site frame [m]")
+    radius: float = Field(0.02, gt=0, le=1.0, description="for its inertia (solid sphere) [m]")
+    volume: float = Field(0.0, ge=0, le=1.0, description="displaced volume [m^3]")
+
+    def payload(self):
+        from uvms_mj.plant.robot import Payload
+
+        return Payload(mass=self.mass, t=self.t, site=self.site, offset=tuple(self.offset), radius=self.radius,
+                       volume=self.volume)
 
 
 class Setpoint(_Section):

@@ -340,7 +340,9 @@ class _Bases:
                 if parts[0] == "nominal":
                     memo["nominal"] = nominal_params(sc)
                 else:
-                    memo["plant"] = read_params(compile_robot(models_dir() / "uvms.xml", plant_overrides(sc)))
+                    from uvms_mj.plant.robot import compile_robot_spec
+
+                    memo["plant"] = read_params(compile_robot_spec(models_dir() / "uvms.xml", plant_overrides(sc)))
             return _override_value(memo[parts[0]], name)
         node: Any = res
         for p in parts:
