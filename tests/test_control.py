@@ -301,7 +301,7 @@ def test_bad_parameters(kwargs, pattern):
 def test_bad_target_and_name():
     with pytest.raises(ValueError, match=r"trajectory\.target = .* must be 2 finite numbers"):
         StraightLine((0.0, 0.0), (np.inf, 0.0))
-    with pytest.raises(ControllerError, match=r"unknown controller 'racc'; registered: .*pd, rac, rac_dob"):
+    with pytest.raises(ControllerError, match=r"unknown controller 'racc' \(did you mean 'rac'\?\); registered: .*pd, rac, rac_dob"):
         create("racc", trajectory=path())
 
 
