@@ -162,10 +162,10 @@ def test_robot_scenario_failure_and_vehicle_setpoint(tmp_path):
     np.testing.assert_allclose(q[-1, :3], [0.3, -0.2, -1.9], atol=0.01)
     yaw = 2 * math.atan2(q[-1, 6], q[-1, 3])
     assert abs(yaw - math.radians(15)) < math.radians(0.5)
-    with pytest.raises(ScenarioError, match=r"vehicle\.trajectory: controller 'rac' takes no vehicle trajectory "
-                                            r"\(base_trajectory\); controllers that do: station_pid"):
-        _load(tmp_path, "robot: bluerov2_heavy\nvehicle: {trajectory: {kind: line, start: [0, 0, 0], "
-                        "target: [1, 0, 0]}}\ncontroller: {name: rac}\n")
+    with pytest.raises(ScenarioError, match=r"vehicle\.trajectory: controller 'task_priority' takes no vehicle "
+                                            r"trajectory \(base_trajectory\); controllers that do: pd, rac, rac_dob"):
+        _load(tmp_path, "robot: bluerov2_alpha\nvehicle: {trajectory: {kind: line, start: [0, 0, 0], "
+                        "target: [1, 0, 0]}}\ncontroller: {name: task_priority}\n")
     with pytest.raises(ScenarioError, match=r"vehicle\.trajectory: the paper's robot takes a vehicle setpoint only"):
         _load(tmp_path, "vehicle: {trajectory: {kind: line, start: [0, 0, 0], target: [1, 0, 0]}}\n")
     with pytest.raises(ScenarioError, match=r"thrusters\.failures\[0\]\.thruster: not a thruster"):
@@ -252,3 +252,25 @@ def test_paper_scenario_overrides_by_name_role_and_factor_and_a_payload(tmp_path
     assert res.status == "ok"
     b = mujoco.mj_name2id(plant.model, mujoco.mjtObj.mjOBJ_BODY, "payload")
     assert plant.model.body_mass[b] == 0.4
+
+
+def test_rac_dob_carries_the_vehicle_along_its_trajectory(tmp_path):
+    """vehicle.trajectory with rac_dob (the paper's method): the vehicle origin follows a 0.4 m
+    line at 0.05 m/s (the tip holds its world position, as far as the arm reaches); after the
+    move the vehicle sits at the line's end (within 5 mm; measured 0.85 mm) and its RMS error
+    over the run stays below 1 cm (measured 0.9 mm; Eq. 11 takes the path's difference
+    quotient as the desired velocity)."""
+    sc = _load(tmp_path, """
+        robot: bluerov2_alpha
+        duration: 16
+        initial: {position: [0, 0, -2], joints: {alpha_shoulder: 100, alpha_elbow: 60}}
+        vehicle:
+          trajectory: {kind: line, start: [0, 0, 0], target: [0.4, 0, 0], cruise_speed: 0.05, accel: 0.05}
+        controller: {name: rac_dob}
+    """)
+    res = run_scenario(sc)
+    assert res.status == "ok", res.reason
+    q, bd = res.signals["q_true"], res.signals["base_desired"]
+    np.testing.assert_allclose(bd[-1, :3], [0.4, 0.0, -2.0], atol=1e-12)
+    np.testing.assert_allclose(q[-1, :3], [0.4, 0.0, -2.0], atol=0.005)
+    assert np.sqrt(np.mean(np.sum((bd[:, :3] - q[:, :3]) ** 2, axis=1))) < 0.01

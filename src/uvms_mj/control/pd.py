@@ -40,6 +40,7 @@ class TaskPD(RAC):
         allocation: "auto" | "clip" | "wls" (as :class:`~uvms_mj.control.rac.RAC`).
         base_reference: the base's desired pose (planar: one number per base joint; free:
             x, y, z, qw, qx, qy, qz); default the first measurement's.
+        base_trajectory: the vehicle origin's desired path (as RAC's).
     """
 
     observer = False
@@ -47,11 +48,12 @@ class TaskPD(RAC):
     use_kernel = False
 
     def __init__(self, trajectory=None, robot: NominalRobot | None = None, T: float = PAPER_T, omega: float = 2.0,
-                 zeta: float = 1.0, allocation: str = "auto", base_reference=None, arm_trajectory=None) -> None:
+                 zeta: float = 1.0, allocation: str = "auto", base_reference=None, base_trajectory=None,
+                 arm_trajectory=None) -> None:
         if arm_trajectory is not None:
             raise ControllerError("pd follows a tip trajectory, not arm joint waypoints (arm_trajectory)")
         super().__init__(trajectory=trajectory, robot=robot, T=T, allocation=allocation,
-                         base_reference=base_reference)
+                         base_reference=base_reference, base_trajectory=base_trajectory)
         self.omega = check_positive("omega", omega)
         self.zeta = check_positive("zeta", zeta)
 

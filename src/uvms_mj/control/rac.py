@@ -111,6 +111,12 @@ def small_det(A: np.ndarray) -> float:
     return float(np.linalg.det(A))
 
 
+def _add_at(x: np.ndarray, idx: np.ndarray, v: np.ndarray) -> np.ndarray:
+    x = x.copy()
+    x[idx] += v
+    return x
+
+
 def _gains(name: str, value: Any, default: np.ndarray) -> np.ndarray:
     if value is None:
         return default.copy()
@@ -151,6 +157,10 @@ class RAC(CompiledSamples, Controller):
             0.2 base rotation and tip: the paper's on its robot).
         js, js_high: Eq. 12 thresholds on the manipulability (paper 0.045; js_high default js).
         n_ramp: samples of the Eq. 12 velocity ramps (ours: 30).
+        base_trajectory: the vehicle origin's desired path (``position(t)``, world [m]; a scenario's
+            ``vehicle.trajectory``): the base's desired position moves along it (plus the Eq. 12
+            offset), its orientation stays the reference's; planar: the path's coordinates along the
+            base's slides. None: a fixed base reference.
         base_reference: base desired pose: planar (x, y, phi0); floating (x, y, z, qw, qx, qy,
             qz); default the first measurement.
         dls_threshold, dls_damping: damped least squares below this manipulability (ours 0.01).
@@ -186,6 +196,7 @@ class RAC(CompiledSamples, Controller):
         js_high: float | None = None,
         n_ramp: int = 30,
         base_reference=None,
+        base_trajectory=None,
         dls_threshold: float = 0.01,
         dls_damping: float = 0.01,
         allocation: str = "auto",
@@ -241,6 +252,9 @@ class RAC(CompiledSamples, Controller):
         self.lam = _gains("lambda", lam, default)
         check_rac_settings(self, js, js_high, n_ramp, dls_threshold, dls_damping, tf, observer_gain, observer_input)
         size = 7 if self.free else nb
+        if base_trajectory is not None and not hasattr(base_trajectory, "position"):
+            raise ControllerError(f"base_trajectory = {base_trajectory!r} must have position(t)")
+        self.base_trajectory = base_trajectory
         self.base_reference = None if base_reference is None else np.asarray(base_reference, dtype=float)
         if self.base_reference is not None and (self.base_reference.shape != (size,)
                                                 or not np.all(np.isfinite(self.base_reference))):
@@ -332,7 +346,15 @@ class RAC(CompiledSamples, Controller):
         off = self._base_offset[k]
         tip = self._tip_k(k)
         cache = self._base_d
-        if cache is None or cache[0] is not off:  # the base's desired part: new only when the offset is
+        if self.base_trajectory is not None:  # a moving base reference: the path's position at t
+            path = np.asarray(self.base_trajectory.position(t), dtype=float).ravel()
+            ref = self._ref_pos.copy()
+            if self.free:
+                ref[:3] = path[:3]
+            else:
+                ref[self.lin] = path[self.tip_rows] if path.size == 3 else path[: self.lin.size]
+            cache = (off, ref + off if self.free else _add_at(ref, self.lin, off))
+        elif cache is None or cache[0] is not off:  # the base's desired part: new only when the offset is
             if self.free:
                 base = self._ref_pos + off
             else:

@@ -25,12 +25,14 @@ class CompiledSamples:
     def _kernel_workspace(self):
         """The compiled kernel's workspace for this run, loaded with the state that
         :meth:`reset` set, or None where the Python code runs (no kernel, the Python hydrodynamics
-        backend, a planar base whose Jacobian is not constant, a robot beyond the kernel's sizes)."""
+        backend, a planar base whose Jacobian is not constant, a robot beyond the kernel's sizes, a
+        moving base reference)."""
         from uvms_mj.control import kernel as _k
 
         r = self.robot
         lib = _k.library()
-        if lib is None or getattr(r, "_served", None) is not None or (not self.free and self._Jb_const is None):
+        if (lib is None or getattr(r, "_served", None) is not None or (not self.free and self._Jb_const is None)
+                or getattr(self, "base_trajectory", None) is not None):  # a moving base reference: Python
             return None
         m, lay = r.model, r.layout
         nb, na = self.base_dofs.size, self.arm_dofs.size
