@@ -204,6 +204,8 @@ def test_a_section_of_the_other_robot_kind_says_so(tmp_path):
     with pytest.raises(ScenarioError, match=r"plant\.model_mismatch: 'model_mismatch' applies to the paper's robot "
                                             r"\(robot: paper\) only"):
         _load(tmp_path, "robot: bluerov2_heavy\nplant: {model_mismatch: true}\n")
+    with pytest.raises(ScenarioError, match=r"plant\.hydro\.added_mass: 'lagged' applies to the paper's robot only"):
+        _load(tmp_path, "robot: bluerov2_heavy\nplant: {hydro: {added_mass: lagged}}\n")
     with pytest.raises(ScenarioError, match=r"arms: unknown key 'arms' \(did you mean 'arm'\?\)"):
         _load(tmp_path, "robot: bluerov2_heavy\narms: {}\n")
 

@@ -10,7 +10,7 @@ from __future__ import annotations
 import difflib
 import inspect
 import math
-from typing import Annotated, Any, Callable, Iterable
+from typing import Annotated, Any, Callable, Iterable, Literal
 
 import copy
 from pathlib import Path
@@ -21,7 +21,8 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 from uvms_mj.control import ControllerError
 from uvms_mj.sim.loop import SensorModel
 
-__all__ = ["ScenarioError", "Outputs", "Sensors", "creation_errors", "log_path", "sensor_model"]
+__all__ = ["Hydro", "NominalSection", "Outputs", "PhysicsSection", "ScenarioError", "Sensors", "creation_errors",
+           "log_path", "sensor_model"]
 
 
 class ScenarioError(ValueError):
@@ -168,6 +169,36 @@ def creation_errors(make: Callable[[dict], Any], params: dict) -> list[tuple[tup
         return []
     issues = [((key,), e, value) for key, value in params.items() if (e := attempt({key: value})) is not None]
     return issues or [((), err, params)]
+
+
+class PhysicsSection(_Section):
+    """MuJoCo integration settings; null: the model file's (the paper's robot: 1/120 s, rk4,
+    filled in when the scenario is validated)."""
+
+    timestep: float | None = Field(None, ge=TIMESTEP_RANGE[0], le=TIMESTEP_RANGE[1], description="plant step [s]")
+    integrator: Literal["euler", "rk4", "implicit", "implicitfast"] | None = Field(
+        None, description="MuJoCo integrator")
+    backend: Literal["auto", "native", "python"] = Field(
+        "auto", description="hydrodynamics backend; auto: native if it builds ($UVMS_MJ_COMPILED=off: python)")
+
+
+class Hydro(_Section):
+    """Which hydrodynamic terms the plant applies (:class:`uvms_mj.physics.terms.HydroTerms`);
+    ``lagged`` added mass and ``mujoco`` drag exist for the paper's planar robot only."""
+
+    added_mass: Literal["exact", "lagged", "off"] = "exact"
+    drag: Literal["strip", "mujoco", "off"] | None = Field(
+        None, description="null: the paper's robot 'mujoco' if plant.model_mismatch else 'strip'; others 'strip'")
+    buoyancy: bool = True
+
+
+class NominalSection(_Section):
+    """The controller's nominal model: the robot's model FILE plus these overrides (never the
+    plant)."""
+
+    overrides: dict[str, Any] = Field(default_factory=dict, description="'<element>.<field>': value, e.g. a 30 % "
+                                      "error as x1.3 (the paper's robot: its own keys too)")
+    gravity: bool = Field(True, description="the nominal model includes gravity and buoyancy")
 
 
 class SignalSection(_Section):

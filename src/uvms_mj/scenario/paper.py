@@ -117,6 +117,9 @@ from uvms_mj.plant.params import (
 from uvms_mj.plant.plant import default_model_path, models_dir
 from uvms_mj.scenario.sections import CurrentSection, Failure, Initial, PayloadSection, Vehicle, vehicle_issues
 from uvms_mj.scenario.base import (  # noqa: F401  (shared names, used here and by uvms_mj.scenario.robot)
+    Hydro,
+    NominalSection,
+    PhysicsSection,
     sensor_issues,
     _NO_VALUE,
     ACCEL_MAX,
@@ -301,26 +304,6 @@ def _fmt_path(loc: Sequence) -> str:
 
 # --------------------------------------------------------------------------- schema
 
-class PhysicsSection(_Section):
-    """MuJoCo integration settings (defaults: the model file's)."""
-
-    timestep: float = Field(default_factory=_default("timestep"), ge=TIMESTEP_RANGE[0], le=TIMESTEP_RANGE[1],
-                            description="plant step [s] (model: 1/120 s)")
-    integrator: Literal["euler", "rk4", "implicit", "implicitfast"] = Field(
-        default_factory=_default("integrator"), description="MuJoCo integrator (model: rk4)")
-    backend: Literal["auto", "native", "python"] = Field(
-        "auto", description="hydrodynamics backend; auto: native if it builds ($UVMS_MJ_COMPILED=off: python)")
-
-
-class Hydro(_Section):
-    """Which hydrodynamic terms the plant applies (:class:`uvms_mj.physics.terms.HydroTerms`)."""
-
-    added_mass: Literal["exact", "lagged", "off"] = "exact"
-    drag: Literal["strip", "mujoco", "off"] | None = Field(
-        None, description="null: 'mujoco' if plant.model_mismatch else 'strip'")
-    buoyancy: bool = True
-
-
 class PlantSection(_Section):
     """The simulated truth."""
 
@@ -363,21 +346,6 @@ class Thrusters(_Section):
         if issues:
             raise _Issues(issues)
         return self
-
-
-class NominalSection(_Section):
-    """The controller's nominal model: the model file plus these overrides (never the plant)."""
-
-    overrides: dict[str, Any] = Field(default_factory=dict, description="OVERRIDE_KEYS entries, e.g. a 30 % error")
-    gravity: bool = Field(True, description="the nominal model includes gravity and buoyancy")
-
-    @field_validator("overrides")
-    @classmethod
-    def _overrides(cls, v: dict) -> dict:
-        issues = _check_overrides(v, allow_thrusters=True)
-        if issues:
-            raise _Issues(issues)
-        return v
 
 
 class ControllerSection(_Section):
@@ -502,6 +470,14 @@ class Scenario(_Section):
 
     @model_validator(mode="after")
     def _period(self) -> "Scenario":
+        ph = self.physics  # null: the model file's (what a resolved scenario shows)
+        if ph.timestep is None:
+            ph.timestep = _default("timestep")()
+        if ph.integrator is None:
+            ph.integrator = _default("integrator")()
+        over = _check_overrides(self.nominal.overrides, allow_thrusters=True)
+        if over:
+            raise _Issues([(("nominal", "overrides") + p, m, v) for p, m, v in over])
         _take_controller_params(self)
         T = paper_controller_period(self)
         dt = self.physics.timestep

@@ -131,18 +131,12 @@ class Arm(_Section):
         return self
 
 
-class RobotHydro(_Section):
-    added_mass: Literal["exact", "off"] = "exact"
-    drag: Literal["strip", "off"] = "strip"
-    buoyancy: bool = True
-
-
 class RobotPlantSection(_Section):
     overrides_file: str | None = Field(None, min_length=1, max_length=4096, description=(
         "YAML file of '<element>.<field>': value overrides (e.g. what uvms-mj identify writes), "
         "relative to the scenario file; applied before overrides"))
     overrides: dict[str, Any] = Field(default_factory=dict, description="'<element>.<field>': value")
-    hydro: RobotHydro = Field(default_factory=RobotHydro)
+    hydro: _S.Hydro = Field(default_factory=_S.Hydro)
     gravity: bool = True
     payload: PayloadSection | None = Field(None, description="a payload picked up during the run")
     current: Annotated[list[Annotated[float, Field(ge=-_S.CURRENT_MAX, le=_S.CURRENT_MAX)]],
@@ -164,17 +158,6 @@ class RobotThrusters(_Section):
         """As ``thrusters.*`` overrides (:func:`uvms_mj.plant.robot.apply_overrides`)."""
         return {f"thrusters.{k}": v for k, v in (("tau", self.tau), ("dead_zone", self.dead_zone),
                                                 ("forcerange", self.force_range)) if v is not None}
-
-
-class RobotNominalSection(_Section):
-    overrides: dict[str, Any] = Field(default_factory=dict)
-    gravity: bool = True
-
-
-class RobotPhysics(_Section):
-    timestep: float | None = Field(None, ge=_S.TIMESTEP_RANGE[0], le=_S.TIMESTEP_RANGE[1])
-    integrator: Literal["euler", "rk4", "implicit", "implicitfast"] | None = None
-    backend: Literal["auto", "native", "python"] = "auto"
 
 
 class RobotController(_Section):
@@ -205,9 +188,9 @@ class RobotScenario(_Section):
     tip_site: str | None = None
     duration: float = Field(20.0, gt=0, le=_S.DURATION_MAX)
     seed: int = Field(0, ge=0, le=_S.SEED_MAX)
-    physics: RobotPhysics = Field(default_factory=RobotPhysics)
+    physics: _S.PhysicsSection = Field(default_factory=_S.PhysicsSection)
     plant: RobotPlantSection = Field(default_factory=RobotPlantSection)
-    nominal: RobotNominalSection = Field(default_factory=RobotNominalSection)
+    nominal: _S.NominalSection = Field(default_factory=_S.NominalSection)
     initial: Initial = Field(default_factory=Initial)
     arm: Arm = Field(default_factory=Arm)
     trajectory: dict[str, Any] | None = Field(
@@ -288,6 +271,13 @@ class RobotScenario(_Section):
                 issues.append((("trajectory",), f"robot {self.robot!r} has no end-effector site (tip_site)", _NO_VALUE))
         if self.arm.waypoints and not names:
             issues.append((("arm",), f"robot {self.robot!r} has no arm joints", _NO_VALUE))
+        hy = self.plant.hydro
+        if hy.added_mass == "lagged":
+            issues.append((("plant", "hydro", "added_mass"), "'lagged' applies to the paper's robot only; allowed "
+                           "here: exact, off", hy.added_mass))
+        if hy.drag == "mujoco":
+            issues.append((("plant", "hydro", "drag"), "'mujoco' applies to the paper's robot only; allowed here: "
+                           "strip, off", hy.drag))
         if self.current is not None and self.plant.current is not None:
             issues.append((("plant", "current"), "give the current in one place: the current section "
                            "(current.velocity) or plant.current, not both", self.plant.current))
@@ -457,7 +447,7 @@ def build_robot_scenario(sc: RobotScenario) -> tuple[Plant, Any]:
         ph, pl = sc.physics, sc.plant
         plant = Plant(
             robot_path(sc.robot, sc.base_dir), overrides=robot_plant_overrides(sc),
-            terms=HydroTerms(added_mass=pl.hydro.added_mass, drag=pl.hydro.drag, buoyancy=pl.hydro.buoyancy),
+            terms=HydroTerms(added_mass=pl.hydro.added_mass, drag=pl.hydro.drag or "strip", buoyancy=pl.hydro.buoyancy),
             gravity=pl.gravity, current=sc.current.current(sc.seed) if sc.current is not None else pl.current,
             timestep=ph.timestep, integrator=ph.integrator,
             initial=sc.initial.state(), tip_site=sc.tip_site, backend=None if ph.backend == "auto" else ph.backend,
