@@ -201,11 +201,12 @@ def test_a_section_of_the_other_robot_kind_says_so(tmp_path):
     (and the other way round) is named as such, not as an unknown key."""
     with pytest.raises(ScenarioError, match=r"arm: 'arm' applies to MJCF robots .*not to the paper's robot"):
         _load(tmp_path, "arm: {waypoints: []}\n")
-    with pytest.raises(ScenarioError, match=r"plant\.model_mismatch: 'model_mismatch' applies to the paper's robot "
-                                            r"\(robot: paper\) only"):
+    with pytest.raises(ScenarioError, match=r"plant\.model_mismatch: applies to the paper's robot only"):
         _load(tmp_path, "robot: bluerov2_heavy\nplant: {model_mismatch: true}\n")
     with pytest.raises(ScenarioError, match=r"plant\.hydro\.added_mass: 'lagged' applies to the paper's robot only"):
         _load(tmp_path, "robot: bluerov2_heavy\nplant: {hydro: {added_mass: lagged}}\n")
+    with pytest.raises(ScenarioError, match=r"plant\.overrides_file: applies to MJCF robots"):
+        _load(tmp_path, "plant: {overrides_file: identified.yaml}\n")
     with pytest.raises(ScenarioError, match=r"arms: unknown key 'arms' \(did you mean 'arm'\?\)"):
         _load(tmp_path, "robot: bluerov2_heavy\narms: {}\n")
 

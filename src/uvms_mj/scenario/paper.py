@@ -115,7 +115,7 @@ from uvms_mj.plant.params import (
     read_params,
 )
 from uvms_mj.plant.plant import default_model_path, models_dir
-from uvms_mj.scenario.sections import CurrentSection, Failure, Initial, PayloadSection, Vehicle, vehicle_issues
+from uvms_mj.scenario.sections import CurrentSection, Failure, Initial, PlantSection, Vehicle, vehicle_issues
 from uvms_mj.scenario.base import (  # noqa: F401  (shared names, used here and by uvms_mj.scenario.robot)
     Hydro,
     NominalSection,
@@ -304,22 +304,33 @@ def _fmt_path(loc: Sequence) -> str:
 
 # --------------------------------------------------------------------------- schema
 
-class PlantSection(_Section):
-    """The simulated truth."""
-
-    model_mismatch: bool = Field(True, description="experiment.truth_overrides() and MuJoCo ellipsoid drag")
-    overrides: dict[str, Any] = Field(default_factory=dict, description="OVERRIDE_KEYS entries applied on top")
-    hydro: Hydro = Field(default_factory=Hydro)
-    gravity: bool = True
-    current: Annotated[list[Annotated[float, Field(ge=-CURRENT_MAX, le=CURRENT_MAX)]],
-                       Field(min_length=2, max_length=2)] = Field(
-        default_factory=lambda: [0.0, 0.0], description="world [vx, vy] [m/s]")
-    payload: PayloadSection | None = Field(None, description="a payload picked up during the run (at the tip)")
+class PaperPlantSection(PlantSection):
+    """The plant section (:class:`uvms_mj.scenario.sections.PlantSection`, every robot's) with the
+    paper robot's checks: its overrides against its model file, no overrides file."""
 
     @field_validator("overrides")
     @classmethod
     def _overrides(cls, v: dict) -> dict:
         issues = _check_overrides(v, allow_thrusters=False)
+        if issues:
+            raise _Issues(issues)
+        return v
+
+    @field_validator("overrides_file")
+    @classmethod
+    def _no_file(cls, v: str | None) -> str | None:
+        if v is not None:
+            raise ValueError("applies to MJCF robots; on the paper's robot give plant.overrides")
+        return v
+
+
+class PaperNominalSection(NominalSection):
+    """The nominal section (every robot's) with the paper robot's check of its overrides."""
+
+    @field_validator("overrides")
+    @classmethod
+    def _overrides(cls, v: dict) -> dict:
+        issues = _check_overrides(v, allow_thrusters=True)
         if issues:
             raise _Issues(issues)
         return v
@@ -432,9 +443,9 @@ class Scenario(_Section):
     duration: float = Field(40.0, gt=0, le=DURATION_MAX, description="simulated time [s]")
     seed: int = Field(0, ge=0, le=SEED_MAX, description="random seed of the sensor noise")
     physics: PhysicsSection = Field(default_factory=PhysicsSection)
-    plant: PlantSection = Field(default_factory=PlantSection)
+    plant: PaperPlantSection = Field(default_factory=PaperPlantSection)
     thrusters: Thrusters = Field(default_factory=Thrusters)
-    nominal: NominalSection = Field(default_factory=NominalSection)
+    nominal: PaperNominalSection = Field(default_factory=PaperNominalSection)
     sensors: Sensors = Field(default_factory=Sensors)
     controller: ControllerSection = Field(default_factory=ControllerSection)
     trajectory: TrajectorySection = Field(default_factory=TrajectorySection)
@@ -470,14 +481,15 @@ class Scenario(_Section):
 
     @model_validator(mode="after")
     def _period(self) -> "Scenario":
+        if self.plant.model_mismatch is None:  # (a default plant section: no field validator ran)
+            self.plant.model_mismatch = True
+        if self.plant.current is None:
+            self.plant.current = [0.0, 0.0]
         ph = self.physics  # null: the model file's (what a resolved scenario shows)
         if ph.timestep is None:
             ph.timestep = _default("timestep")()
         if ph.integrator is None:
             ph.integrator = _default("integrator")()
-        over = _check_overrides(self.nominal.overrides, allow_thrusters=True)
-        if over:
-            raise _Issues([(("nominal", "overrides") + p, m, v) for p, m, v in over])
         _take_controller_params(self)
         T = paper_controller_period(self)
         dt = self.physics.timestep

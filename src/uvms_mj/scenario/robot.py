@@ -81,7 +81,7 @@ from uvms_mj.scenario import base as _S  # noqa: E402  (the shared sections and 
 from uvms_mj.scenario.sections import (  # noqa: E402
     CurrentSection,
     Failure,
-    PayloadSection,
+    PlantSection,
     Initial,
     Vehicle,
     vehicle_issues,
@@ -131,18 +131,6 @@ class Arm(_Section):
         return self
 
 
-class RobotPlantSection(_Section):
-    overrides_file: str | None = Field(None, min_length=1, max_length=4096, description=(
-        "YAML file of '<element>.<field>': value overrides (e.g. what uvms-mj identify writes), "
-        "relative to the scenario file; applied before overrides"))
-    overrides: dict[str, Any] = Field(default_factory=dict, description="'<element>.<field>': value")
-    hydro: _S.Hydro = Field(default_factory=_S.Hydro)
-    gravity: bool = True
-    payload: PayloadSection | None = Field(None, description="a payload picked up during the run")
-    current: Annotated[list[Annotated[float, Field(ge=-_S.CURRENT_MAX, le=_S.CURRENT_MAX)]],
-                       Field(min_length=3, max_length=3)] | None = Field(None, description="world [vx, vy, vz] m/s")
-
-
 class RobotThrusters(_Section):
     """The plant's thrusters (the controller allocates with the nominal model's, as if ideal);
     null: the model file's."""
@@ -189,7 +177,7 @@ class RobotScenario(_Section):
     duration: float = Field(20.0, gt=0, le=_S.DURATION_MAX)
     seed: int = Field(0, ge=0, le=_S.SEED_MAX)
     physics: _S.PhysicsSection = Field(default_factory=_S.PhysicsSection)
-    plant: RobotPlantSection = Field(default_factory=RobotPlantSection)
+    plant: PlantSection = Field(default_factory=PlantSection)
     nominal: _S.NominalSection = Field(default_factory=_S.NominalSection)
     initial: Initial = Field(default_factory=Initial)
     arm: Arm = Field(default_factory=Arm)
@@ -271,6 +259,9 @@ class RobotScenario(_Section):
                 issues.append((("trajectory",), f"robot {self.robot!r} has no end-effector site (tip_site)", _NO_VALUE))
         if self.arm.waypoints and not names:
             issues.append((("arm",), f"robot {self.robot!r} has no arm joints", _NO_VALUE))
+        if self.plant.model_mismatch:
+            issues.append((("plant", "model_mismatch"), "applies to the paper's robot only (give the truth's "
+                           "differences as plant.overrides)", True))
         hy = self.plant.hydro
         if hy.added_mass == "lagged":
             issues.append((("plant", "hydro", "added_mass"), "'lagged' applies to the paper's robot only; allowed "

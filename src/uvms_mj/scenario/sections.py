@@ -19,9 +19,9 @@ from uvms_mj.plant.layout import InitialState
 from uvms_mj.plant.plant import ThrusterFailure
 from uvms_mj.rotations import quat_from_rpy
 from uvms_mj.scenario.base import _NO_VALUE as _NO
-from uvms_mj.scenario.base import CURRENT_MAX, DURATION_MAX, SEED_MAX, _Issues, _Section
+from uvms_mj.scenario.base import CURRENT_MAX, DURATION_MAX, SEED_MAX, Hydro, _Issues, _Section
 
-__all__ = ["CurrentSection", "Failure", "Initial", "Orientation", "PayloadSection", "Setpoint", "Vehicle"]
+__all__ = ["CurrentSection", "Failure", "Initial", "Orientation", "PayloadSection", "PlantSection", "Setpoint", "Vehicle"]
 
 #: Bounds (as the paper scenario's).
 POSITION_MAX = 1000.0  # [m] |initial.position|, |vehicle.setpoint.position|
@@ -161,6 +161,23 @@ class PayloadSection(_Section):
 
         return Payload(mass=self.mass, t=self.t, site=self.site, offset=tuple(self.offset), radius=self.radius,
                        volume=self.volume)
+
+
+class PlantSection(_Section):
+    """The simulated truth, for every robot (what applies to one kind only says so)."""
+
+    model_mismatch: bool | None = Field(None, description="the paper's robot: experiment.truth_overrides() and "
+                                        "MuJoCo ellipsoid drag (null: true); not for other robots")
+    overrides: dict[str, Any] = Field(default_factory=dict, description="'<element>.<field>': value (the vehicle "
+                                      "role, factors 'x1.3'; the paper's robot: its own keys too), applied on top")
+    hydro: Hydro = Field(default_factory=Hydro)
+    gravity: bool = True
+    current: Cur3 | None = Field(None, description="a uniform current, world [m/s] (the older spelling of "
+                                 "current: {velocity: ...}); null: the model's (the paper's robot: still water)")
+    overrides_file: str | None = Field(None, min_length=1, max_length=4096, description=(
+        "MJCF robots: a YAML file of '<element>.<field>': value overrides (e.g. what uvms-mj identify writes), "
+        "relative to the scenario file; applied before overrides"))
+    payload: PayloadSection | None = Field(None, description="a payload picked up during the run")
 
 
 class Setpoint(_Section):
