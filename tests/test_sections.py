@@ -277,3 +277,16 @@ def test_rac_dob_carries_the_vehicle_along_its_trajectory(tmp_path):
     np.testing.assert_allclose(bd[-1, :3], [0.4, 0.0, -2.0], atol=1e-12)
     np.testing.assert_allclose(q[-1, :3], [0.4, 0.0, -2.0], atol=0.005)
     assert np.sqrt(np.mean(np.sum((bd[:, :3] - q[:, :3]) ** 2, axis=1))) < 0.01
+
+
+def test_robot_controller_base_reference_truth_and_nominal(tmp_path):
+    """controller.base_reference applies to every robot: on the BlueROV2 + Alpha, ``truth`` is the
+    plant's true initial pose and ``nominal`` the model file's (its qpos0: no initial keyframe)."""
+    for ref, expected in (("truth", [0.1, 0.0, -1.5, 1.0, 0.0, 0.0, 0.0]), ("nominal", [0, 0, 0, 1, 0, 0, 0])):
+        sc = _load(tmp_path, f"robot: bluerov2_alpha\ninitial: {{position: [0.1, 0, -1.5]}}\n"
+                             f"controller: {{name: rac, base_reference: {ref}}}\n")
+        _, ctrl = build(sc)
+        np.testing.assert_allclose(ctrl.base_reference, expected, rtol=0, atol=1e-15)
+    with pytest.raises(ScenarioError, match=r"controller\.base_reference: give one base reference"):
+        _load(tmp_path, "robot: bluerov2_alpha\nvehicle: {setpoint: {position: [0, 0, -1]}}\n"
+                        "controller: {name: rac, base_reference: truth}\n")

@@ -21,7 +21,7 @@ from pydantic import BaseModel, ConfigDict, Field, field_validator, model_valida
 from uvms_mj.control import ControllerError
 from uvms_mj.sim.loop import SensorModel
 
-__all__ = ["Hydro", "NominalSection", "Outputs", "PhysicsSection", "ScenarioError", "Sensors", "creation_errors",
+__all__ = ["ControllerSection", "Hydro", "NominalSection", "Outputs", "PhysicsSection", "ScenarioError", "Sensors", "creation_errors",
            "log_path", "sensor_model"]
 
 
@@ -199,6 +199,19 @@ class NominalSection(_Section):
     overrides: dict[str, Any] = Field(default_factory=dict, description="'<element>.<field>': value, e.g. a 30 % "
                                       "error as x1.3 (the paper's robot: its own keys too)")
     gravity: bool = Field(True, description="the nominal model includes gravity and buoyancy")
+
+
+class ControllerSection(_Section):
+    """A registered controller, its keyword parameters and the base's reference, for every robot
+    (each robot kind gives its default name: :class:`uvms_mj.scenario.paper.PaperControllerSection`,
+    :class:`uvms_mj.scenario.robot.RobotControllerSection`)."""
+
+    name: str = Field(description="one of uvms_mj.control.available()")
+    params: dict[str, Any] = Field(default_factory=dict, description="keyword arguments of the controller")
+    base_reference: Literal["measured", "truth", "nominal"] = Field(
+        "measured", description="the base's reference pose: the first (noisy) measurement, the plant's true "
+        "initial pose, or the model file's initial pose (its initial keyframe, the paper's paper_initial; else "
+        "qpos0)")
 
 
 class SignalSection(_Section):

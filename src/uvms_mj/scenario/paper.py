@@ -117,6 +117,7 @@ from uvms_mj.plant.params import (
 from uvms_mj.plant.plant import default_model_path, models_dir
 from uvms_mj.scenario.sections import CurrentSection, Failure, Initial, PlantSection, Vehicle, vehicle_issues
 from uvms_mj.scenario.base import (  # noqa: F401  (shared names, used here and by uvms_mj.scenario.robot)
+    ControllerSection,
     Hydro,
     NominalSection,
     PhysicsSection,
@@ -359,14 +360,11 @@ class Thrusters(_Section):
         return self
 
 
-class ControllerSection(_Section):
-    """A registered controller and its keyword parameters."""
+class PaperControllerSection(ControllerSection):
+    """The controller section (:class:`uvms_mj.scenario.base.ControllerSection`, every robot's) on
+    the paper's robot: default ``rac_dob``, its parameters checked by creating it."""
 
     name: str = Field("rac_dob", description="one of uvms_mj.control.available()")
-    params: dict[str, Any] = Field(default_factory=dict, description="keyword arguments of the controller")
-    base_reference: Literal["measured", "truth", "nominal"] = Field(
-        "measured", description="the base's reference pose: the first (noisy) measurement, the plant's true "
-        "initial pose, or the model file's initial pose (keyframe paper_initial)")
 
     @field_validator("name")
     @classmethod
@@ -379,7 +377,7 @@ class ControllerSection(_Section):
         return v
 
     @model_validator(mode="after")
-    def _params(self) -> "ControllerSection":
+    def _params(self) -> "PaperControllerSection":
         issues = _check_controller_params(self.name, self.params)
         if issues:
             raise _Issues([(("params",) + p, m, v) for p, m, v in issues])
@@ -447,7 +445,7 @@ class Scenario(_Section):
     thrusters: Thrusters = Field(default_factory=Thrusters)
     nominal: PaperNominalSection = Field(default_factory=PaperNominalSection)
     sensors: Sensors = Field(default_factory=Sensors)
-    controller: ControllerSection = Field(default_factory=ControllerSection)
+    controller: PaperControllerSection = Field(default_factory=PaperControllerSection)
     trajectory: TrajectorySection = Field(default_factory=TrajectorySection)
     initial: Initial = Field(default_factory=Initial, description="the initial state (default: the model's "
                              "keyframe paper_initial); joints by name (joint1, joint2)")

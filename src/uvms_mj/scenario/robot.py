@@ -69,7 +69,7 @@ from uvms_mj.sim.loop import RunResult, run_closed_loop
 from uvms_mj.control.nominal import JointTrajectory, NominalRobot
 from uvms_mj.plant.params import ParameterError
 from uvms_mj.plant.files import robot_path
-from uvms_mj.plant.layout import Layout
+from uvms_mj.plant.layout import InitialState, Layout
 from uvms_mj.plant.plant import Plant
 from uvms_mj.plant.robot import compile_robot_spec
 
@@ -148,9 +148,10 @@ class RobotThrusters(_Section):
                                                 ("forcerange", self.force_range)) if v is not None}
 
 
-class RobotController(_Section):
+class RobotControllerSection(_S.ControllerSection):
+    """The controller section (every robot's) on an MJCF robot: default ``station_pid``."""
+
     name: str = Field("station_pid", description="a controller for floating robots")
-    params: dict[str, Any] = Field(default_factory=dict)
 
 
 def floating_controllers() -> list[str]:
@@ -194,7 +195,7 @@ class RobotScenario(_Section):
     thrusters: RobotThrusters = Field(default_factory=RobotThrusters)
     vehicle: Vehicle = Field(default_factory=Vehicle)
     sensors: _S.Sensors = Field(default_factory=_S.Sensors)
-    controller: RobotController = Field(default_factory=RobotController)
+    controller: RobotControllerSection = Field(default_factory=RobotControllerSection)
     controllers: dict[str, dict[str, Any]] = Field(default_factory=dict, description="per-controller parameters")
     warm_start: bool = True
     outputs: _S.Outputs = Field(default_factory=_S.Outputs)
@@ -316,6 +317,14 @@ class RobotScenario(_Section):
             if not found and not issues:
                 issues += _try_create(c.name, c.params, path)
         issues += vehicle_issues(self.vehicle, self.controller.name, self.controller.params)
+        if c.base_reference != "measured" and c.name in allowed:
+            named, _ = _S._controller_signature(c.name)
+            if "base_reference" not in named:
+                issues.append((("controller", "base_reference"), f"controller {c.name!r} takes no base reference; "
+                               "allowed: measured", c.base_reference))
+            elif c.params.get("base_reference") is not None or self.vehicle.setpoint is not None:
+                issues.append((("controller", "base_reference"), "give one base reference: controller.base_reference, "
+                               "controller.params.base_reference or vehicle.setpoint", c.base_reference))
         if not issues:
             dt = self.physics.timestep or float(m.opt.timestep)
             T = robot_controller_period(self)
@@ -459,6 +468,17 @@ def build_robot_scenario(sc: RobotScenario) -> tuple[Plant, Any]:
         if "trajectory" in inspect.signature(_S._factory(sc.controller.name)).parameters or var_kw:
             params["trajectory"] = trajectory_of(sc, plant.tip_position)
         params.update(vehicle_params(sc.vehicle, plant, sc.base_dir))
+        ref = sc.controller.base_reference
+        if ref != "measured":
+            a, n = plant.layout.base_qadr, plant.layout.base_nq
+            if ref == "truth":
+                params["base_reference"] = [float(v) for v in plant.q[a:a + n]]
+            else:  # the model file's initial state (its initial keyframe, else qpos0)
+                import mujoco
+
+                d = mujoco.MjData(nominal.model)
+                InitialState().apply(nominal.model, d, nominal.layout)
+                params["base_reference"] = [float(v) for v in d.qpos[a:a + n]]
         ctrl = create(sc.controller.name, robot=nominal, arm_trajectory=arm, **params)
     except (ParameterError, ControllerError, ValueError, TypeError) as exc:
         raise _S.ScenarioError(f"scenario {sc.name!r}: {exc}") from None
