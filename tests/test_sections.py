@@ -290,3 +290,23 @@ def test_robot_controller_base_reference_truth_and_nominal(tmp_path):
     with pytest.raises(ScenarioError, match=r"controller\.base_reference: give one base reference"):
         _load(tmp_path, "robot: bluerov2_alpha\nvehicle: {setpoint: {position: [0, 0, -1]}}\n"
                         "controller: {name: rac, base_reference: truth}\n")
+
+
+def test_one_thrusters_section(tmp_path):
+    """The thrusters section is every robot's: on the paper's robot a dead-zone band in newtons
+    (or true: the model's band) reaches the plant; on an MJCF robot the band and lag reach every
+    thruster plugin (command units), true is refused in one line."""
+    plant, _ = build(_load(tmp_path, "duration: 1\nthrusters: {dead_zone: [-0.1, 0.3]}\n"))
+    assert plant.dead_zone and plant._dead_band == (-0.1, 0.3)
+    plant, _ = build(_load(tmp_path, "duration: 1\nthrusters: {dead_zone: true}\n"))
+    assert plant._dead_band == tuple(Plant().params.dead_zone)
+    sc = _load(tmp_path, "robot: bluerov2_heavy\nthrusters: {dead_zone: [-0.05, 0.05], tau: 0.08}\n")
+    plant, _ = build(sc)
+    spec = pm.load_spec(plant.model_path)
+    from uvms_mj.plant.robot import apply_overrides
+
+    apply_overrides(spec, sc.thrusters.overrides())
+    cfg = next(dict(x.config) for x in spec.plugins if x.plugin_name == "uvms.thruster")
+    assert cfg["dead_zone"] == "-0.05 0.05" and cfg["tau"] == "0.08"
+    with pytest.raises(ScenarioError, match=r"thrusters\.dead_zone: give the band \[low, high\]"):
+        _load(tmp_path, "robot: bluerov2_heavy\nthrusters: {dead_zone: true}\n")

@@ -102,7 +102,7 @@ def test_bad_keys_name_the_problem(item, message):
     (["trajectory.target=scale([1, 2])"], "trajectory.target is null in the scenario"),
     (["plant.current[0]=[0, 0.1]", "plant.current=[[0, 0]]"], "plant.current is varied twice"),
     (["thrusters.tau=uniform(0.02, 0.05)"], "need --n N"),
-    (["thrusters.tau=normal(0.02, 0.05)"], "thrusters.tau: Input should be greater than 0"),
+    (["thrusters.tau=normal(0.02, 0.05)"], "thrusters.tau: Input should be greater than"),
     (["sensors.delay=[0, 2]"], "sensors.delay"),
 ])
 def test_plan_rejects_bad_values_before_any_run(vary, message):

@@ -115,7 +115,15 @@ from uvms_mj.plant.params import (
     read_params,
 )
 from uvms_mj.plant.plant import default_model_path, models_dir
-from uvms_mj.scenario.sections import CurrentSection, Failure, Initial, PlantSection, Vehicle, vehicle_issues
+from uvms_mj.scenario.sections import (
+    CurrentSection,
+    Failure,
+    Initial,
+    PlantSection,
+    ThrustersSection,
+    Vehicle,
+    vehicle_issues,
+)
 from uvms_mj.scenario.base import (  # noqa: F401  (shared names, used here and by uvms_mj.scenario.robot)
     ControllerSection,
     Hydro,
@@ -337,27 +345,39 @@ class PaperNominalSection(NominalSection):
         return v
 
 
-class Thrusters(_Section):
-    """The plant's thrusters (the controller allocates with the nominal model's, as if ideal)."""
-
-    tau: float = Field(default_factory=_default("tau"), gt=0, le=TAU_MAX, description="first-order lag [s] (model: 0.02)")
-    force_range: ForceVec2 = Field(default_factory=_default("force_range"), description="[min, max] [N], min < 0 < max")
-    dead_zone: bool = Field(False, description="zero commands inside dead_zone_band")
-    dead_zone_band: ForceVec2 = Field(default_factory=_default("dead_zone_band"), description="[low, high] [N]")
-    failures: list[Failure] = Field(default_factory=list, description="thrusters failing during the run")
+class Thrusters(ThrustersSection):
+    """The thrusters section (:class:`uvms_mj.scenario.sections.ThrustersSection`, every robot's) on
+    the paper's robot: tau, force_range and dead_zone_band default to the model file's (filled in),
+    dead_zone true / false / a band [N]."""
 
     @model_validator(mode="after")
     def _ranges(self) -> "Thrusters":
+        _fill_thrusters(self)
         issues = []
         lo, hi = self.force_range
         if not lo < 0 < hi:
             issues.append((("force_range",), "must satisfy min < 0 < max [N]", self.force_range))
-        lo, hi = self.dead_zone_band
-        if not lo <= 0 <= hi:
-            issues.append((("dead_zone_band",), "must satisfy low <= 0 <= high [N]", self.dead_zone_band))
+        if self.tau <= 0:
+            issues.append((("tau",), "must be > 0 s (the paper's thrusters are lagged)", self.tau))
+        for key in ("dead_zone_band",) + (("dead_zone",) if isinstance(self.dead_zone, list) else ()):
+            lo, hi = getattr(self, key)
+            if not lo <= 0 <= hi:
+                issues.append(((key,), "must satisfy low <= 0 <= high [N]", getattr(self, key)))
         if issues:
             raise _Issues(issues)
         return self
+
+
+def _fill_thrusters(th: ThrustersSection) -> None:
+    """The paper robot's thruster defaults: the model file's tau, force range and dead-zone band."""
+    if th.tau is None:
+        th.tau = _default("tau")()
+    if th.force_range is None:
+        th.force_range = _default("force_range")()
+    if th.dead_zone_band is None:
+        th.dead_zone_band = _default("dead_zone_band")()
+    if th.dead_zone is None:
+        th.dead_zone = False
 
 
 class PaperControllerSection(ControllerSection):
@@ -483,6 +503,7 @@ class Scenario(_Section):
             self.plant.model_mismatch = True
         if self.plant.current is None:
             self.plant.current = [0.0, 0.0]
+        _fill_thrusters(self.thrusters)  # (a default thrusters section: no validator ran)
         ph = self.physics  # null: the model file's (what a resolved scenario shows)
         if ph.timestep is None:
             ph.timestep = _default("timestep")()

@@ -82,6 +82,7 @@ from uvms_mj.scenario.sections import (  # noqa: E402
     CurrentSection,
     Failure,
     PlantSection,
+    ThrustersSection,
     Initial,
     Vehicle,
     vehicle_issues,
@@ -131,23 +132,6 @@ class Arm(_Section):
         return self
 
 
-class RobotThrusters(_Section):
-    """The plant's thrusters (the controller allocates with the nominal model's, as if ideal);
-    null: the model file's."""
-
-    tau: float | None = Field(None, ge=0, le=_S.TAU_MAX, description="first-order lag [s] of every thruster")
-    dead_zone: Annotated[list[float], Field(min_length=2, max_length=2)] | None = Field(
-        None, description="[low, high] command band giving no thrust (the thruster plugin's command units)")
-    force_range: Annotated[list[Annotated[float, Field(ge=-_S.FORCE_MAX, le=_S.FORCE_MAX)]],
-                           Field(min_length=2, max_length=2)] | None = Field(None, description="[min, max] [N]")
-    failures: list[Failure] = Field(default_factory=list, description="thrusters failing during the run")
-
-    def overrides(self) -> dict:
-        """As ``thrusters.*`` overrides (:func:`uvms_mj.plant.robot.apply_overrides`)."""
-        return {f"thrusters.{k}": v for k, v in (("tau", self.tau), ("dead_zone", self.dead_zone),
-                                                ("forcerange", self.force_range)) if v is not None}
-
-
 class RobotControllerSection(_S.ControllerSection):
     """The controller section (every robot's) on an MJCF robot: default ``station_pid``."""
 
@@ -192,7 +176,7 @@ class RobotScenario(_Section):
                                   "the timestep)")
     current: CurrentSection | None = Field(None, description="the water current (constant, gauss_markov, profile); "
                                            "plant.current is the older spelling of a constant one")
-    thrusters: RobotThrusters = Field(default_factory=RobotThrusters)
+    thrusters: ThrustersSection = Field(default_factory=ThrustersSection)
     vehicle: Vehicle = Field(default_factory=Vehicle)
     sensors: _S.Sensors = Field(default_factory=_S.Sensors)
     controller: RobotControllerSection = Field(default_factory=RobotControllerSection)
@@ -273,6 +257,12 @@ class RobotScenario(_Section):
         if self.current is not None and self.plant.current is not None:
             issues.append((("plant", "current"), "give the current in one place: the current section "
                            "(current.velocity) or plant.current, not both", self.plant.current))
+        if isinstance(self.thrusters.dead_zone, bool) and self.thrusters.dead_zone:
+            issues.append((("thrusters", "dead_zone"), "give the band [low, high] in the thrusters' command units "
+                           "(true means the paper robot's band)", True))
+        if self.thrusters.dead_zone_band is not None:
+            issues.append((("thrusters", "dead_zone_band"), "applies to the paper's robot (with dead_zone: true); "
+                           "give dead_zone: [low, high]", self.thrusters.dead_zone_band))
         for key, value in self.thrusters.overrides().items():
             try:
                 compile_robot_spec(path, {key: value})

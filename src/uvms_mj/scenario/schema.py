@@ -405,7 +405,7 @@ def plant_overrides(scenario: Scenario) -> dict:
     th = scenario.thrusters
     over["thrusters.tau"] = th.tau
     over["thrusters.force_range"] = list(th.force_range)
-    over["thrusters.dead_zone"] = list(th.dead_zone_band)
+    over["thrusters.dead_zone"] = list(th.dead_zone) if isinstance(th.dead_zone, list) else list(th.dead_zone_band)
     return over
 
 
@@ -464,7 +464,7 @@ def build(scenario: Scenario) -> tuple[Plant, Any]:
             terms=HydroTerms(added_mass=pl.hydro.added_mass, drag=drag_model(scenario), buoyancy=pl.hydro.buoyancy),
             gravity=pl.gravity,
             current=scenario.current.current(scenario.seed) if scenario.current is not None else tuple(pl.current),
-            dead_zone=th.dead_zone,
+            dead_zone=bool(th.dead_zone),  # (a band: the plant's parameters carry it, above)
             timestep=ph.timestep,
             integrator=ph.integrator,
             backend=None if ph.backend == "auto" else ph.backend,

@@ -19,9 +19,10 @@ from uvms_mj.plant.layout import InitialState
 from uvms_mj.plant.plant import ThrusterFailure
 from uvms_mj.rotations import quat_from_rpy
 from uvms_mj.scenario.base import _NO_VALUE as _NO
-from uvms_mj.scenario.base import CURRENT_MAX, DURATION_MAX, SEED_MAX, Hydro, _Issues, _Section
+from uvms_mj.scenario.base import CURRENT_MAX, DURATION_MAX, FORCE_MAX, SEED_MAX, TAU_MAX, Hydro, _Issues, _Section
 
-__all__ = ["CurrentSection", "Failure", "Initial", "Orientation", "PayloadSection", "PlantSection", "Setpoint", "Vehicle"]
+__all__ = ["CurrentSection", "Failure", "Initial", "Orientation", "PayloadSection", "PlantSection", "Setpoint", "ThrustersSection",
+           "Vehicle"]
 
 #: Bounds (as the paper scenario's).
 POSITION_MAX = 1000.0  # [m] |initial.position|, |vehicle.setpoint.position|
@@ -178,6 +179,29 @@ class PlantSection(_Section):
         "MJCF robots: a YAML file of '<element>.<field>': value overrides (e.g. what uvms-mj identify writes), "
         "relative to the scenario file; applied before overrides"))
     payload: PayloadSection | None = Field(None, description="a payload picked up during the run")
+
+
+class ThrustersSection(_Section):
+    """The plant's thrusters, for every robot (the controller allocates with the nominal model's,
+    as if ideal); null: the model file's."""
+
+    tau: float | None = Field(None, ge=0, le=TAU_MAX, description="first-order lag [s] of every thruster")
+    force_range: Annotated[list[Annotated[float, Field(ge=-FORCE_MAX, le=FORCE_MAX)]],
+                           Field(min_length=2, max_length=2)] | None = Field(None, description="[min, max] [N]")
+    dead_zone: bool | Annotated[list[float], Field(min_length=2, max_length=2)] | None = Field(
+        None, description="[low, high]: commands strictly inside give no thrust (the thrusters' command units: "
+        "newtons for the paper's robot, the thruster plugin's for curve thrusters); the paper's robot also "
+        "true / false (its band, dead_zone_band)")
+    dead_zone_band: Annotated[list[Annotated[float, Field(ge=-FORCE_MAX, le=FORCE_MAX)]],
+                              Field(min_length=2, max_length=2)] | None = Field(
+        None, description="the paper's robot: the band of dead_zone: true, [low, high] [N]")
+    failures: list[Failure] = Field(default_factory=list, description="thrusters failing during the run")
+
+    def overrides(self) -> dict:
+        """An MJCF robot's thrusters as ``thrusters.*`` overrides (:func:`uvms_mj.plant.robot.apply_overrides`)."""
+        return {f"thrusters.{k}": v for k, v in (("tau", self.tau), ("dead_zone", self.dead_zone),
+                                                ("forcerange", self.force_range))
+                if v is not None and not isinstance(v, bool)}
 
 
 class Setpoint(_Section):
