@@ -170,8 +170,9 @@ def _first_line(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {line[:200]}" if line else type(exc).__name__
 
 
-def _headless_context_class():
-    """EGL or OSMesa GLContext class for a MuJoCo imported with the GLFW default, or RenderError."""
+def _first_headless(load):
+    """``load(backend)`` for the first of EGL, then OSMesa, whose libraries are there and that
+    loads; RenderError (one line: why each failed, what to install) if none does."""
     errors = []
     for backend in ("egl", "osmesa"):
         missing = _missing_libs(backend)
@@ -179,14 +180,22 @@ def _headless_context_class():
             errors.append(f"{backend}: no {missing[0]}")
             continue
         try:
-            if backend == "egl":
-                from mujoco.egl import GLContext
-            else:
-                from mujoco.osmesa import GLContext
-            return GLContext
-        except Exception as exc:  # noqa: BLE001
+            return load(backend)
+        except Exception as exc:  # noqa: BLE001 (PyOpenGL raises anything from ImportError to RuntimeError)
             errors.append(f"{backend}: {_first_line(exc)}")
     raise RenderError(f"no OpenGL backend for rendering without a display ({'; '.join(errors)}): {_install_hint()}")
+
+
+def _headless_context_class():
+    """EGL or OSMesa GLContext class for a MuJoCo imported with the GLFW default, or RenderError."""
+    def load(backend):
+        if backend == "egl":
+            from mujoco.egl import GLContext
+        else:
+            from mujoco.osmesa import GLContext
+        return GLContext
+
+    return _first_headless(load)
 
 
 def _make_renderer(model, height: int, width: int):
@@ -234,18 +243,11 @@ def dm_control_context_class():
     if (os.environ.get("MUJOCO_GL") or "").strip() or _render.BACKEND != "glfw" \
             or platform.system() != "Linux" or not _headless():
         return _render.Renderer
-    errors = []
-    for backend in ("egl", "osmesa"):
-        missing = _missing_libs(backend)
-        if missing:
-            errors.append(f"{backend}: no {missing[0]}")
-            continue
-        try:
-            if backend == "egl":
-                from dm_control._render.pyopengl.egl_renderer import EGLContext as cls
-            else:
-                from dm_control._render.pyopengl.osmesa_renderer import OSMesaContext as cls
-            return cls
-        except Exception as exc:  # noqa: BLE001 (PyOpenGL raises anything from ImportError to RuntimeError)
-            errors.append(f"{backend}: {_first_line(exc)}")
-    raise RenderError(f"no OpenGL backend for rendering without a display ({'; '.join(errors)}): {_install_hint()}")
+    def load(backend):
+        if backend == "egl":
+            from dm_control._render.pyopengl.egl_renderer import EGLContext as cls
+        else:
+            from dm_control._render.pyopengl.osmesa_renderer import OSMesaContext as cls
+        return cls
+
+    return _first_headless(load)

@@ -111,12 +111,6 @@ def small_det(A: np.ndarray) -> float:
     return float(np.linalg.det(A))
 
 
-def _add_at(x: np.ndarray, idx: np.ndarray, v: np.ndarray) -> np.ndarray:
-    x = x.copy()
-    x[idx] += v
-    return x
-
-
 def _gains(name: str, value: Any, default: np.ndarray) -> np.ndarray:
     if value is None:
         return default.copy()
@@ -348,12 +342,12 @@ class RAC(CompiledSamples, Controller):
         cache = self._base_d
         if self.base_trajectory is not None:  # a moving base reference: the path's position at t
             path = np.asarray(self.base_trajectory.position(t), dtype=float).ravel()
-            ref = self._ref_pos.copy()
+            base = self._ref_pos.copy()
             if self.free:
-                ref[:3] = path[:3]
+                base[:3] = path[:3] + off
             else:
-                ref[self.lin] = path[self.tip_rows] if path.size == 3 else path[: self.lin.size]
-            cache = (off, ref + off if self.free else _add_at(ref, self.lin, off))
+                base[self.lin] = (path[self.tip_rows] if path.size == 3 else path[: self.lin.size]) + off
+            cache = (off, base)
         elif cache is None or cache[0] is not off:  # the base's desired part: new only when the offset is
             if self.free:
                 base = self._ref_pos + off

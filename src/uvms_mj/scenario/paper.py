@@ -86,11 +86,7 @@ any controller its own parameters (used by ``compare`` and by ``--set controller
 a controller named on the command line gets ``controllers[name]``, else its defaults, never the
 file controller's parameters).
 
-Overrides from the command line (``sets``) are ``key.path=value`` strings, the value parsed as
-YAML (``controller.name=rac``, ``trajectory.displacement=[0.2,0]``, ``plant.current=[0.1,0]``,
-``plant.overrides.base.volume=0.03``: inside ``overrides`` the rest of the path is one key). They
-are applied to the raw mapping before validation; setting ``trajectory.target`` removes
-``trajectory.displacement`` and vice versa (they are alternatives).
+Overrides from the command line (``sets``, ``key.path=value``): :func:`uvms_mj.scenario.schema.apply_sets`.
 """
 
 from __future__ import annotations

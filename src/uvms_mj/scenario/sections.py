@@ -15,6 +15,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from uvms_mj.physics.current import Current
+from uvms_mj.plant.errors import ParameterError
 from uvms_mj.plant.layout import InitialState
 from uvms_mj.plant.plant import ThrusterFailure
 from uvms_mj.rotations import quat_from_rpy
@@ -211,40 +212,29 @@ class Setpoint(_Section):
     orientation: Orientation | None = None
     angle_unit: Literal["deg", "rad"] = Field("deg", description="unit of orientation.rpy")
 
-    def pose(self, layout, q0: np.ndarray) -> list[float]:
+    def pose(self, plant) -> list[float]:
         """The setpoint as the base's qpos (free: x, y, z, qw, qx, qy, qz; planar: one per base
-        joint), missing parts from ``q0`` (the initial qpos)."""
+        joint): the plant's initial state with the setpoint's position and orientation
+        (:meth:`uvms_mj.plant.layout.InitialState.apply`, which also maps a pose onto a planar
+        base's joints).
+
+        Raises:
+            uvms_mj.plant.errors.ParameterError: a pose a planar base cannot take."""
+        import dataclasses
+
         import mujoco
 
         k = math.pi / 180.0 if self.angle_unit == "deg" else 1.0
-        quat = None
+        st = plant.initial
+        if self.position is not None:
+            st = dataclasses.replace(st, position=tuple(self.position))
         if self.orientation is not None:
-            quat = (tuple(self.orientation.quat) if self.orientation.quat is not None
-                    else tuple(quat_from_rpy(*(k * v for v in self.orientation.rpy))))
-        a = layout.base_qadr
-        out = np.array(q0[a:a + layout.base_nq], dtype=float)
-        if layout.base_free:
-            if self.position is not None:
-                out[:3] = self.position
-            if quat is not None:
-                out[3:] = np.asarray(quat) / np.linalg.norm(quat)
-            return out.tolist()
-        return _planar_pose(layout, out, self.position, quat, mujoco)
-
-
-def _planar_pose(layout, out, position, quat, mujoco) -> list[float]:
-    """A planar base's joint coordinates for a world position / orientation (the plane's axes;
-    the hinge about world z, the paper's)."""
-    axes = list(layout.plane_axes)
-    nslide = len(axes) if layout.base_hinge >= 0 else len(out)
-    if position is not None:
-        for i, ax in enumerate(axes[:nslide]):
-            out[i] = position[ax]
-    if quat is not None and layout.base_hinge >= 0:
-        rv = np.zeros(3)
-        mujoco.mju_quat2Vel(rv, np.asarray(quat, dtype=float) / np.linalg.norm(quat), 1.0)
-        out[nslide] = float(rv[2])
-    return out.tolist()
+            st = dataclasses.replace(st, quat=(tuple(self.orientation.quat) if self.orientation.quat is not None
+                                               else tuple(quat_from_rpy(*(k * v for v in self.orientation.rpy)))))
+        d = mujoco.MjData(plant.model)
+        st.apply(plant.model, d, plant.layout)
+        a = plant.layout.base_qadr
+        return d.qpos[a:a + plant.layout.base_nq].tolist()
 
 
 class Vehicle(_Section):
@@ -315,7 +305,10 @@ def vehicle_params(vehicle: Vehicle, plant, base_dir: str | None = None) -> dict
     out: dict = {}
     q0 = plant.q
     if vehicle.setpoint is not None:
-        out["base_reference"] = vehicle.setpoint.pose(plant.layout, q0)
+        try:
+            out["base_reference"] = vehicle.setpoint.pose(plant)
+        except ParameterError as exc:
+            raise ParameterError(f"vehicle.setpoint: {str(exc).removeprefix('initial.')}") from None
     if vehicle.trajectory is not None:
         from uvms_mj.control.trajectories import make_trajectory, starting_at
 

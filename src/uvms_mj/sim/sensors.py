@@ -123,7 +123,9 @@ class SignalSensors:
             slides = [i for i in range(a, a + nb) if i not in hinge]
             self.index = {"position": np.array(slides, dtype=int), "attitude": np.array(hinge, dtype=int),
                           "joints": np.asarray(layout.joint_qadr, dtype=int)}
-        self.history: list[tuple[np.ndarray, np.ndarray]] = []
+        #: the true states of the last samples a refresh may read (sample index -> (q, qd))
+        self.history: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self.window = max([e + d for e, d in self.steps.values()] or [1])
         self.held: dict[str, tuple[int, np.ndarray]] = {}
 
     def _value(self, name: str, q: np.ndarray, qd: np.ndarray) -> np.ndarray:
@@ -148,7 +150,8 @@ class SignalSensors:
 
     def measure(self, k: int, q_true: np.ndarray, qd_true: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
         """(qpos, qvel or None) as measured at control sample k (called once per sample, in order)."""
-        self.history.append((np.array(q_true, dtype=float), np.array(qd_true, dtype=float)))
+        self.history[k] = (np.array(q_true, dtype=float), np.array(qd_true, dtype=float))
+        self.history.pop(k - self.window - 1, None)  # older than any refresh can reach
         q = np.array(q_true, dtype=float)
         qd = None
         for name in SIGNALS:
@@ -158,7 +161,7 @@ class SignalSensors:
             r = (k // every) * every
             held = self.held.get(name)
             if held is None or held[0] != r:
-                qj, qdj = self.history[max(0, r - delay)]
+                qj, qdj = self.history[max(0, r - delay)]  # r > k - every: within the window
                 held = self.held[name] = (r, self._value(name, qj, qdj))
             if name == "velocity":
                 qd = held[1].copy()
