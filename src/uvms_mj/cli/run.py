@@ -218,7 +218,7 @@ def validate(scenario: str | None, sets: tuple[str, ...], list_only: bool, show_
 
     sc = _load(scenario, sets)
     try:
-        build(sc)
+        _, ctrl = build(sc)
     except (ScenarioError, ParameterError, ValueError) as exc:
         raise click.UsageError(str(exc)) from None
     _check_out(_default_log(sc, None, sc.controller.name), protect=(scenario,))
@@ -227,6 +227,11 @@ def validate(scenario: str | None, sets: tuple[str, ...], list_only: bool, show_
         import yaml
 
         click.echo(yaml.safe_dump(resolved(sc), sort_keys=False, default_flow_style=None), nl=False)
+        thresholds = getattr(ctrl, "resolved_params", None)  # RAC's "auto" thresholds as the numbers the run uses
+        if isinstance(thresholds, dict) and "js" in thresholds:
+            from uvms_mj.control.manipulability import describe_thresholds
+
+            click.echo(f"{sc.controller.name}: {describe_thresholds(thresholds)}", err=True)
         click.echo(f"{scenario}: ok ({sc.name}, controller {sc.controller.name}, {sc.duration:g} s)", err=True)
         return
     click.echo(f"{scenario}: ok ({sc.name}, controller {sc.controller.name}, {sc.duration:g} s)")

@@ -30,7 +30,8 @@ rows): the weighted pseudo-inverse B# = W^-1 B^T (B W^-1 B^T + mu^2 I)^-1 with W
 arm inertia M_MM (dynamically consistent; the null-space motion does not load the task), and a
 null-space posture term q_ddot_0 = k_null (q_rest - q) - d_null q_dot on the arm joints,
 q_rest the initial angles. Eq. 12 moves the base's desired position while the manipulability
-sqrt(det(B B^T)) (= |det B| for the paper's square B) is below ``js``. Inputs (Eqs. 13-15)
+sqrt(det(B B^T)) (= |det B| for the paper's square B) is below ``js`` (by default the paper's
+fraction of the arm's largest manipulability, as is ``dls_threshold``: :mod:`.manipulability`). Inputs (Eqs. 13-15)
 by computed torque on the nominal model; the observer (Eqs. 14-15 corrected, Fig. 3(b)) acts on
 the base's generalized force (planar: world fx, fy, tau0; free joint: world force, body
 moment: MuJoCo's free-joint dofs). The base force goes to the thrusters as a body-frame wrench
@@ -47,12 +48,12 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from uvms_mj.control.manipulability import DLS_RATIO, PAPER_JS_RATIO, manipulability, resolve_thresholds, small_inv
 from uvms_mj.control.nominal import NominalRobot
 from uvms_mj.control.rac_compiled import CompiledSamples
 from uvms_mj.physics.thrusters import Allocator
 from uvms_mj.control.base import Command, Controller, ControllerError, Measurement, check_positive, register
 from uvms_mj.control.digital import (
-    PAPER_JS,
     PAPER_T,
     PAPER_TF,
     LowPassZOH,
@@ -67,48 +68,6 @@ TIP_BLOCK = 600
 #: Default gains per task block (the paper's Gamma = Lambda = diag(0.3, 0.3, 0.2, 0.2, 0.2) on
 #: its planar task: 0.3 for the base position, 0.2 for the base rotation and the tip).
 GAIN_BASE_POSITION, GAIN_BASE_ROTATION, GAIN_TIP = 0.3, 0.2, 0.2
-
-
-def small_inv(A: np.ndarray) -> np.ndarray:
-    """Inverse of a 1x1, 2x2 or 3x3 matrix in closed form (adjugate / determinant; numpy's
-    LAPACK call costs more than the arithmetic at these sizes), else ``numpy.linalg.inv``.
-
-    Raises:
-        numpy.linalg.LinAlgError: singular matrix (determinant exactly 0)."""
-    n = A.shape[0]
-    if n > 3:
-        return np.linalg.inv(A)
-    if n == 1:
-        if A[0, 0] == 0:
-            raise np.linalg.LinAlgError("Singular matrix")
-        return np.array([[1.0 / A[0, 0]]])
-    if n == 2:
-        (a, b), (c, d) = A.tolist()
-        det = a * d - b * c
-        if det == 0:
-            raise np.linalg.LinAlgError("Singular matrix")
-        return np.array([[d / det, -b / det], [-c / det, a / det]])
-    (a, b, c), (d, e, f), (g, h, i) = A.tolist()
-    co = [e * i - f * h, f * g - d * i, d * h - e * g]
-    det = a * co[0] + b * co[1] + c * co[2]
-    if det == 0:
-        raise np.linalg.LinAlgError("Singular matrix")
-    return np.array([[co[0], c * h - b * i, b * f - c * e],
-                     [co[1], a * i - c * g, c * d - a * f],
-                     [co[2], b * g - a * h, a * e - b * d]]) / det
-
-
-def small_det(A: np.ndarray) -> float:
-    """Determinant of a 1x1, 2x2 or 3x3 matrix in closed form, else ``numpy.linalg.det``."""
-    n = A.shape[0]
-    if n == 1:
-        return float(A[0, 0])
-    if n == 2:
-        return float(A[0, 0] * A[1, 1] - A[0, 1] * A[1, 0])
-    if n == 3:
-        (a, b, c), (d, e, f), (g, h, i) = A.tolist()
-        return a * (e * i - f * h) + b * (f * g - d * i) + c * (d * h - e * g)
-    return float(np.linalg.det(A))
 
 
 def _gains(name: str, value: Any, default: np.ndarray) -> np.ndarray:
@@ -149,7 +108,10 @@ class RAC(CompiledSamples, Controller):
         T: sampling period [s] (paper 1/60).
         gamma, lam: Gamma, Lambda (1 or task-size numbers in (0, 1); default 0.3 base position,
             0.2 base rotation and tip: the paper's on its robot).
-        js, js_high: Eq. 12 thresholds on the manipulability (paper 0.045; js_high default js).
+        js, js_high: Eq. 12 thresholds on the manipulability w: "auto" (js's default) = js_ratio
+            (js_high_ratio, default js_ratio) x the arm's largest w over its joint ranges -- 0.72,
+            the paper's 0.045 on its arm (:mod:`uvms_mj.control.manipulability`) -- or a number
+            [m^r]; js_high default js. Resolved numbers: ``resolved_params``.
         n_ramp: samples of the Eq. 12 velocity ramps (ours: 30).
         base_trajectory: the vehicle origin's desired path (``position(t)``, world [m]; a scenario's
             ``vehicle.trajectory``): the base's desired position moves along it (plus the Eq. 12
@@ -157,7 +119,8 @@ class RAC(CompiledSamples, Controller):
             base's slides. None: a fixed base reference.
         base_reference: base desired pose: planar (x, y, phi0); floating (x, y, z, qw, qx, qy,
             qz); default the first measurement.
-        dls_threshold, dls_damping: damped least squares below this manipulability (ours 0.01).
+        dls_threshold, dls_damping: damped least squares below this manipulability: "auto" =
+            dls_ratio (ours 0.16, 0.01 on the paper's arm) x the largest, or a number.
         allocation: "auto" | "clip" | "wls" (module docstring).
         tf, observer_gain, observer_input: the observer (as the paper code's).
         tip_orientation: also control the tip's orientation (floating robots; needs 6 arm dofs
@@ -186,12 +149,12 @@ class RAC(CompiledSamples, Controller):
         T: float = PAPER_T,
         gamma=None,
         lam=None,
-        js: float = PAPER_JS,
-        js_high: float | None = None,
+        js: float | str = "auto",
+        js_high: float | str | None = None,
         n_ramp: int = 30,
         base_reference=None,
         base_trajectory=None,
-        dls_threshold: float = 0.01,
+        dls_threshold: float | str = "auto",
         dls_damping: float = 0.01,
         allocation: str = "auto",
         tf: float = PAPER_TF,
@@ -203,6 +166,9 @@ class RAC(CompiledSamples, Controller):
         arm_trajectory=None,
         observer_arm: bool = False,
         tf_arm: float | None = None,
+        js_ratio: float = PAPER_JS_RATIO,
+        js_high_ratio: float | None = None,
+        dls_ratio: float = DLS_RATIO,
     ) -> None:
         if robot is None:
             robot = paper_nominal_robot()
@@ -244,6 +210,11 @@ class RAC(CompiledSamples, Controller):
         self.nbt = 6 if self.free else nb  # base rows of the task
         self.gamma = _gains("gamma", gamma, default)
         self.lam = _gains("lambda", lam, default)
+        rows = self.tip_rows if not self.free else np.arange(6 if self.tip_orientation else 3)  # B's rows of [jacp; jacr]
+        #: The thresholds as numbers ("auto" resolved; what a run records: sim.loop's meta["controller_params"]).
+        self.resolved_params = resolve_thresholds(robot, self.arm_dofs, rows, js, js_high, dls_threshold, js_ratio,
+                                                  js_high_ratio, dls_ratio)
+        js, js_high, dls_threshold = (self.resolved_params[k] for k in ("js", "js_high", "dls_threshold"))
         check_rac_settings(self, js, js_high, n_ramp, dls_threshold, dls_damping, tf, observer_gain, observer_input)
         size = 7 if self.free else nb
         if base_trajectory is not None and not hasattr(base_trajectory, "position"):
@@ -472,12 +443,7 @@ class RAC(CompiledSamples, Controller):
         b, a = self.base_dofs, self.arm_dofs
         nbt = self.nbt
         Bm = J[nbt:][:, a]  # arm Jacobian: tip rows, arm dofs
-        if Bm.shape[0] == Bm.shape[1]:
-            detb = small_det(Bm)
-            manip = abs(detb)
-        else:
-            detb = float("nan")
-            manip = math.sqrt(max(small_det(Bm @ Bm.T), 0.0))
+        manip, detb = manipulability(Bm)
 
         # Eq. 12: the base carries the arm while the manipulability is below js.
         v_base = self.singular.update(k, manip)

@@ -85,6 +85,8 @@ class RunResult:
             ``torques``).
         status: "ok" or "diverged".
         reason: why it stopped early ("" if ok).
+        meta: ``T``, ``dt``, ``seed``, ``controller`` and, for a controller with a
+            ``resolved_params`` dict (RAC: its thresholds as numbers), ``controller_params``.
     """
 
     t: np.ndarray
@@ -291,6 +293,9 @@ def run_closed_loop(
     else:
         signals = {key: np.asarray([row[key] for row in rows if key in row]) for key in keys}
     meta = {"T": T, "dt": dt, "seed": seed, "controller": controller_name(controller)}
+    resolved = getattr(controller, "resolved_params", None)  # parameters resolved at construction (RAC's thresholds)
+    if isinstance(resolved, dict):
+        meta["controller_params"] = dict(resolved)
     warned = mujoco_warnings(clear=True)
     if warned:
         meta["mujoco_warnings"] = warned
