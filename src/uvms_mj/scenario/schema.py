@@ -316,6 +316,21 @@ def apply_sets(raw: dict, sets: Sequence[str]) -> dict:
     return out
 
 
+def apply_scenario_sets(raw: dict, sets: Sequence[str]) -> dict:
+    """:func:`apply_sets` on a scenario mapping, where controller.params belong to the
+    scenario's controller: a ``controller.name`` set that changes the controller (and sets no
+    ``controller.params``) gives the new one its own parameters from the controllers section,
+    else its defaults (what ``run``, ``compare`` and ``sweep`` do alike)."""
+    before = _controller_name(raw)
+    raw = apply_sets(raw, sets)
+    after = _controller_name(raw)
+    touched = any(str(x).partition("=")[0].strip().startswith("controller.params") for x in sets)
+    if after != before and not touched and isinstance(raw.get("controller"), dict):
+        own = raw.get("controllers", {}).get(after) if isinstance(raw.get("controllers"), dict) else None
+        raw["controller"]["params"] = copy.deepcopy(own) if own is not None else {}
+    return raw
+
+
 def _controller_name(raw: dict) -> Any:
     c = raw.get("controller")
     default = "station_pid" if raw.get("robot", "paper") != "paper" else "rac_dob"
@@ -351,16 +366,8 @@ def load_scenario(path: str | Path, sets: Sequence[str] = ()) -> Scenario:
     if not isinstance(raw, dict):
         raise ScenarioError(f"{source}: a scenario must be a mapping of keys to values, got {_fmt_value(raw)}")
     if sets:
-        before = _controller_name(raw)
-        raw = apply_sets(raw, sets)
+        raw = apply_scenario_sets(raw, sets)
         source = f"{source} (with --set {' '.join(sets)})"
-        after = _controller_name(raw)
-        touched = any(str(x).partition("=")[0].strip().startswith("controller.params") for x in sets)
-        if after != before and not touched and isinstance(raw.get("controller"), dict):
-            # controller.params belong to the file's controller: another controller gets its own
-            # parameters from the controllers section, else its defaults.
-            own = raw.get("controllers", {}).get(after) if isinstance(raw.get("controllers"), dict) else None
-            raw["controller"]["params"] = copy.deepcopy(own) if own is not None else {}
     if "name" not in raw:
         raw = {"name": re.sub(r"[^A-Za-z0-9_.-]", "_", p.stem) or "scenario", **raw}
     return validate_scenario(raw, source, base_dir=p.parent)

@@ -317,9 +317,9 @@ class _Bases:
 
     def scenario(self, controller: str):
         if controller not in self.cache:
-            from uvms_mj.scenario.schema import apply_sets, resolved, validate_scenario
+            from uvms_mj.scenario.schema import apply_scenario_sets, resolved, validate_scenario
 
-            raw = apply_sets(self.base_raw, [f"controller.name={controller}"])
+            raw = apply_scenario_sets(self.base_raw, [f"controller.name={controller}"])
             sc = validate_scenario(raw, f"the scenario with controller {controller!r}")
             self.cache[controller] = (sc, resolved(sc), {})
         return self.cache[controller]
@@ -461,7 +461,7 @@ def plan_sweep(
     spec, key, range, sampled value or controller raises SweepError before anything runs."""
     from uvms_mj.scenario.schema import (
         ScenarioError,
-        apply_sets,
+        apply_scenario_sets,
         build,
         load_scenario,
         resolved,
@@ -504,7 +504,7 @@ def plan_sweep(
             run_sets = [f"controller.name={c}", f"seed={s}"] + [_set_text(p, v) for p, v in values.items()]
             rid = f"s{i:0{width}d}-{c}"
             try:
-                raw = apply_sets(base_raw, run_sets)
+                raw = apply_scenario_sets(base_raw, run_sets)
                 sc = validate_scenario(raw, f"run {rid} ({', '.join(f'{k}={_fmt(x)}' for k, x in draws.items())})")
             except ScenarioError as exc:
                 errors.append(str(exc))
