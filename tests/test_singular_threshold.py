@@ -150,8 +150,10 @@ def test_alpha_phase_off_mid_workspace_on_when_stretched(alpha):
     assert _w(robot, ctrl.arm_dofs, [0.0, s0, straight - math.radians(20.0), 0.0]) < ctrl.js
     posture = f"initial.joints={{alpha_shoulder: {math.degrees(s0):.4f}, alpha_elbow: {math.degrees(e0):.4f}}}"
     phases = {}
-    for key, sets in (("auto", []), ("absolute", ["controller.params.js=0.045", "controller.params.dls_threshold=0.01"])):
-        sc = load_scenario(SCEN / "bluerov2_alpha_circle_current.yaml", ["duration=10", "controller.name=rac", posture] + sets)
+    absolute = ["controller.params.js=0.045", "controller.params.dls_threshold=0.01"]
+    for key, sets in (("auto", []), ("absolute", absolute)):
+        sets = ["duration=10", "controller.name=rac", posture] + sets
+        sc = load_scenario(SCEN / "bluerov2_alpha_circle_current.yaml", sets)
         res = run_scenario(sc)
         assert res.status == "ok"
         phases[key] = res.signals["singular_phase"]

@@ -31,10 +31,10 @@ arm inertia M_MM (dynamically consistent; the null-space motion does not load th
 null-space posture term q_ddot_0 = k_null (q_rest - q) - d_null q_dot on the arm joints,
 q_rest the initial angles. Eq. 12 moves the base's desired position while the manipulability
 sqrt(det(B B^T)) (= |det B| for the paper's square B) is below ``js`` (by default the paper's
-fraction of the arm's largest manipulability, as is ``dls_threshold``: :mod:`.manipulability`). Inputs (Eqs. 13-15)
-by computed torque on the nominal model; the observer (Eqs. 14-15 corrected, Fig. 3(b)) acts on
-the base's generalized force (planar: world fx, fy, tau0; free joint: world force, body
-moment: MuJoCo's free-joint dofs). The base force goes to the thrusters as a body-frame wrench
+fraction of the arm's largest manipulability, as is ``dls_threshold``: :mod:`.manipulability`).
+Inputs (Eqs. 13-15) by computed torque on the nominal model; the observer (Eqs. 14-15
+corrected, Fig. 3(b)) acts on the base's generalized force (planar: world fx, fy, tau0; free
+joint: world force, body moment: MuJoCo's free-joint dofs). The base force goes to the thrusters as a body-frame wrench
 (``allocation``: "clip" -- least squares then clipped to the limits, the paper code's -- or
 "wls", :class:`uvms_mj.physics.thrusters.Allocator`, weighted least squares with redistribution; "auto":
 clip for a square allocation, wls otherwise).
@@ -210,7 +210,8 @@ class RAC(CompiledSamples, Controller):
         self.nbt = 6 if self.free else nb  # base rows of the task
         self.gamma = _gains("gamma", gamma, default)
         self.lam = _gains("lambda", lam, default)
-        rows = self.tip_rows if not self.free else np.arange(6 if self.tip_orientation else 3)  # B's rows of [jacp; jacr]
+        # B's rows of [jacp; jacr]: the tip rows of the task
+        rows = self.tip_rows if not self.free else np.arange(6 if self.tip_orientation else 3)
         #: The thresholds as numbers ("auto" resolved; what a run records: sim.loop's meta["controller_params"]).
         self.resolved_params = resolve_thresholds(robot, self.arm_dofs, rows, js, js_high, dls_threshold, js_ratio,
                                                   js_high_ratio, dls_ratio)
