@@ -184,3 +184,13 @@ def test_scenario_params_reach_the_controllers(tmp_path):
     ctrl = build(sc)[1]
     assert ctrl.station_attitude == "measured"
     np.testing.assert_allclose(ctrl.base_trajectory.position(0.0), [0, 0, -1], rtol=0, atol=1e-15)
+
+
+def test_setpoint_with_station_attitude_is_refused_at_load(tmp_path):
+    """A setpoint is the station: station_attitude (the default station's) with it is one error."""
+    from uvms_mj.scenario.schema import ScenarioError
+
+    with pytest.raises(ScenarioError, match=r"vehicle\.setpoint: give either vehicle\.setpoint or "
+                                            r"controller\.params\.station_attitude"):
+        _scenario(tmp_path, "station_pid", 1.0, params=", params: {station_attitude: level}",
+                  extra="vehicle: {setpoint: {orientation: {rpy: [0, 0, 30]}}}\n")
