@@ -241,7 +241,7 @@ class Vehicle(_Section):
     """What the vehicle is to do: hold a setpoint, or follow a trajectory of its origin."""
 
     setpoint: Setpoint | None = Field(None, description="the pose to hold; null: the first measurement's "
-                                        "position and yaw, level (the controller's station_attitude)")
+                                        "(a floating vehicle's position and yaw, level: station_attitude)")
     trajectory: dict[str, Any] | None = Field(
         None, description="the vehicle origin's path (world; uvms_mj.control.trajectories kinds), started at "
         "the setpoint (or the initial position); for controllers that take base_trajectory")
