@@ -66,7 +66,7 @@ def test_redundant_arm_solution_satisfies_the_task_and_weights():
     J q_ddot = a_d - J_dot q_dot (the first sample has no J_dot term) and the null-space part
     is M_MM-orthogonal to the task (W = M_MM): (I - B# B) is a projector with B (I - B# B) = 0."""
     nom = NominalRobot("bluerov2_alpha")
-    c = create("rac", robot=nom, T=0.02)
+    c = create("rac", robot=nom, T=0.02, station_attitude="measured")  # the random attitude is the station's
     rng = np.random.default_rng(4)
     q = nom.model.qpos0.copy()
     q[:3] = [0.1, -0.2, -1.0]

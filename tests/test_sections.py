@@ -162,10 +162,10 @@ def test_robot_scenario_failure_and_vehicle_setpoint(tmp_path):
     np.testing.assert_allclose(q[-1, :3], [0.3, -0.2, -1.9], atol=0.01)
     yaw = 2 * math.atan2(q[-1, 6], q[-1, 3])
     assert abs(yaw - math.radians(15)) < math.radians(0.5)
-    with pytest.raises(ScenarioError, match=r"vehicle\.trajectory: controller 'task_priority' takes no vehicle "
-                                            r"trajectory \(base_trajectory\); controllers that do: pd, rac, rac_dob"):
-        _load(tmp_path, "robot: bluerov2_alpha\nvehicle: {trajectory: {kind: line, start: [0, 0, 0], "
-                        "target: [1, 0, 0]}}\ncontroller: {name: task_priority}\n")
+    # every built-in floating controller takes a vehicle trajectory, task_priority too
+    ctrl = build(_load(tmp_path, "robot: bluerov2_alpha\nvehicle: {trajectory: {kind: line, start: [0, 0, 0], "
+                                 "target: [1, 0, 0]}}\ncontroller: {name: task_priority}\n"))[1]
+    assert ctrl.base_trajectory is not None
     with pytest.raises(ScenarioError, match=r"vehicle\.trajectory: the paper's robot takes a vehicle setpoint only"):
         _load(tmp_path, "vehicle: {trajectory: {kind: line, start: [0, 0, 0], target: [1, 0, 0]}}\n")
     with pytest.raises(ScenarioError, match=r"thrusters\.failures\[0\]\.thruster: not a thruster"):
@@ -310,3 +310,28 @@ def test_one_thrusters_section(tmp_path):
     assert cfg["dead_zone"] == "-0.05 0.05" and cfg["tau"] == "0.08"
     with pytest.raises(ScenarioError, match=r"thrusters\.dead_zone: give the band \[low, high\]"):
         _load(tmp_path, "robot: bluerov2_heavy\nthrusters: {dead_zone: true}\n")
+
+
+def test_vehicle_trajectory_refused_by_a_controller_without_base_trajectory(tmp_path, monkeypatch):
+    """A (plug-in) floating controller without ``base_trajectory``: vehicle.trajectory is refused
+    in one line naming the controllers that take it (every built-in floating one)."""
+    from uvms_mj.control import base
+
+    class Toy(base.Controller):
+        robots = "floating"
+
+        def __init__(self, robot=None, T=0.02, arm_trajectory=None, base_reference=None):
+            self.T = T
+
+        def reset(self, measurement):
+            pass
+
+        def compute(self, measurement):
+            return base.Command(thrust=np.zeros(0), torques=np.zeros(0))
+
+    monkeypatch.setitem(base._REGISTRY, "toy", Toy)
+    with pytest.raises(ScenarioError, match=r"vehicle\.trajectory: controller 'toy' takes no vehicle trajectory "
+                                            r"\(base_trajectory\); controllers that do: pd, rac, rac_dob, station_pid, "
+                                            r"task_priority"):
+        _load(tmp_path, "robot: bluerov2_alpha\nvehicle: {trajectory: {kind: line, start: [0, 0, 0], "
+                        "target: [1, 0, 0]}}\ncontroller: {name: toy}\n")

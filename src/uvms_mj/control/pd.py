@@ -7,8 +7,8 @@ with the task p, its Jacobian J and the error e_p = p_d - p of :class:`uvms_mj.c
 orientation as a world rotation vector, tip position), g_bar the nominal hold force (gravity
 minus buoyancy, :meth:`uvms_mj.control.nominal.NominalRobot.hold_force`), no feed-forward and no
 dynamics model beyond g_bar. The base's generalized force goes to the thrusters as RAC's does
-(``allocation``). The desired base pose is the first measurement's (or ``base_reference``);
-Eq. 12 is not used.
+(``allocation``). The desired base pose is ``base_reference``, else the first measurement's
+(a floating base: levelled by ``station_attitude``, as RAC's); Eq. 12 is not used.
 
 Gains: Kp = omega^2 Lambda_t, Kd = 2 zeta omega Lambda_t with Lambda_t the diagonal of the
 nominal task-space inertia (J M^-1 J^T)^-1 at the first sample (ours: omega = 2 rad/s,
@@ -41,6 +41,8 @@ class TaskPD(RAC):
         base_reference: the base's desired pose (planar: one number per base joint; free:
             x, y, z, qw, qx, qy, qz); default the first measurement's.
         base_trajectory: the vehicle origin's desired path (as RAC's).
+        station_attitude: the default station's attitude on a floating base (as RAC's): "level"
+            (default) | "measured".
     """
 
     observer = False
@@ -49,11 +51,12 @@ class TaskPD(RAC):
 
     def __init__(self, trajectory=None, robot: NominalRobot | None = None, T: float = PAPER_T, omega: float = 2.0,
                  zeta: float = 1.0, allocation: str = "auto", base_reference=None, base_trajectory=None,
-                 arm_trajectory=None) -> None:
+                 arm_trajectory=None, station_attitude: str | None = None) -> None:
         if arm_trajectory is not None:
             raise ControllerError("pd follows a tip trajectory, not arm joint waypoints (arm_trajectory)")
         super().__init__(trajectory=trajectory, robot=robot, T=T, allocation=allocation,
-                         base_reference=base_reference, base_trajectory=base_trajectory)
+                         base_reference=base_reference, base_trajectory=base_trajectory,
+                         station_attitude=station_attitude)
         self.omega = check_positive("omega", omega)
         self.zeta = check_positive("zeta", zeta)
 

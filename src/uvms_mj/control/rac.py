@@ -60,6 +60,7 @@ from uvms_mj.control.digital import (
     SingularHandler,
     check_rac_settings,
 )
+from uvms_mj.control.station import check_base_reference, check_base_trajectory, check_station_attitude, level_quaternion
 from uvms_mj.rotations import mat_to_quat, quat_to_mat, rotation_log
 
 #: Samples of desired tip positions evaluated at once (:meth:`RAC._tip_k`).
@@ -118,7 +119,9 @@ class RAC(CompiledSamples, Controller):
             offset), its orientation stays the reference's; planar: the path's coordinates along the
             base's slides. None: a fixed base reference.
         base_reference: base desired pose: planar (x, y, phi0); floating (x, y, z, qw, qx, qy,
-            qz); default the first measurement.
+            qz); default the first measurement (floating: with ``station_attitude``).
+        station_attitude: the default station's attitude on a floating base, "level" (default:
+            roll = pitch = 0 at the measured yaw) | "measured" (:mod:`uvms_mj.control.station`).
         dls_threshold, dls_damping: damped least squares below this manipulability: "auto" =
             dls_ratio (ours 0.16, 0.01 on the paper's arm) x the largest, or a number.
         allocation: "auto" | "clip" | "wls" (module docstring).
@@ -154,6 +157,7 @@ class RAC(CompiledSamples, Controller):
         n_ramp: int = 30,
         base_reference=None,
         base_trajectory=None,
+        station_attitude: str | None = None,
         dls_threshold: float | str = "auto",
         dls_damping: float = 0.01,
         allocation: str = "auto",
@@ -218,13 +222,9 @@ class RAC(CompiledSamples, Controller):
         js, js_high, dls_threshold = (self.resolved_params[k] for k in ("js", "js_high", "dls_threshold"))
         check_rac_settings(self, js, js_high, n_ramp, dls_threshold, dls_damping, tf, observer_gain, observer_input)
         size = 7 if self.free else nb
-        if base_trajectory is not None and not hasattr(base_trajectory, "position"):
-            raise ControllerError(f"base_trajectory = {base_trajectory!r} must have position(t)")
-        self.base_trajectory = base_trajectory
-        self.base_reference = None if base_reference is None else np.asarray(base_reference, dtype=float)
-        if self.base_reference is not None and (self.base_reference.shape != (size,)
-                                                or not np.all(np.isfinite(self.base_reference))):
-            raise ControllerError(f"base_reference = {base_reference!r} must be {size} finite numbers")
+        self.base_trajectory = check_base_trajectory(base_trajectory)
+        self.base_reference = check_base_reference(base_reference, size)
+        self.station_attitude = check_station_attitude(station_attitude, self.free, self.base_reference)
         self.null_kp = float(null_kp)
         self.null_kd = float(null_kd)
         if not (math.isfinite(self.null_kp) and self.null_kp >= 0 and math.isfinite(self.null_kd) and self.null_kd >= 0):
@@ -390,7 +390,8 @@ class RAC(CompiledSamples, Controller):
             a = lay.base_qadr
             ref = q[a:a + 7] if self.base_reference is None else self.base_reference
             self._ref_pos = np.array(ref[:3], dtype=float)
-            self._ref_R = quat_to_mat(ref[3:7])
+            level = self.base_reference is None and self.station_attitude == "level"
+            self._ref_R = quat_to_mat(level_quaternion(ref[3:7]) if level else ref[3:7])
         else:
             self._ref_pos = (q[self.base_qpos] if self.base_reference is None else self.base_reference).astype(float).copy()
         self.arm_qadr = np.array([int(r.model.jnt_qposadr[r.model.dof_jntid[d]]) for d in self.arm_dofs], dtype=int)

@@ -9,7 +9,9 @@ Hydrodynamics and Motion Control*, 2nd ed., 2021, ch. 15 (PID with restoring-for
 compensation).
 
 At sample k (period T), with the measured vehicle position p (world) and orientation R, the
-desired pose (p_d, R_d) (the first measurement: station keeping) and joint angles q (desired
+desired pose (p_d, R_d) (the station: ``base_reference``, else the first measurement's position
+with a level attitude at its yaw, ``station_attitude``; :mod:`uvms_mj.control.station`) and
+joint angles q (desired
 q_d(t), rates qd_d(t) from the scenario's arm waypoints):
 
     e_p = p_d - p                          (world, m)
@@ -38,34 +40,11 @@ from uvms_mj.control.nominal import JointTrajectory, NominalRobot
 from uvms_mj.rotations import quat_to_mat, rotation_log
 from uvms_mj.physics.thrusters import Allocator
 from uvms_mj.control.base import Command, Controller, ControllerError, Measurement, check_positive, register
+from uvms_mj.control.station import check_base_reference, check_base_trajectory, check_station_attitude, station_reference
 
 #: Default controller period [s]: 50 Hz, a usual ROV control rate and a whole multiple of the
 #: BlueROV2 models' 2 ms step (the paper's 1/60 s is not).
 DEFAULT_T = 0.02
-
-
-def station_reference(q: np.ndarray, layout, base_reference=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """The station to hold: ``base_reference`` (x, y, z [m] world, qw, qx, qy, qz) if given,
-    else the first measurement ``q`` (qpos)'s vehicle pose: vehicle position (world [m]), unit
-    quaternion (w, x, y, z), its rotation matrix, and the arm joint angles [rad] (from ``q``)."""
-    a = layout.base_qadr
-    pose = q[a:a + 7] if base_reference is None else np.asarray(base_reference, dtype=float)
-    quat = pose[3:7] / np.linalg.norm(pose[3:7])
-    return pose[:3].copy(), quat, quat_to_mat(quat), q[layout.joint_qadr].copy()
-
-
-def check_base_reference(base_reference) -> np.ndarray | None:
-    """``base_reference`` as 7 numbers (x, y, z [m] world, qw, qx, qy, qz), or None.
-
-    Raises:
-        ControllerError: not 7 finite numbers, or a zero quaternion."""
-    if base_reference is None:
-        return None
-    ref = np.asarray(base_reference, dtype=float).ravel()
-    if ref.shape != (7,) or not np.all(np.isfinite(ref)) or np.linalg.norm(ref[3:]) < 1e-9:
-        raise ControllerError(f"base_reference = {base_reference!r} must be 7 finite numbers (x, y, z [m] world, "
-                              "qw, qx, qy, qz; a non-zero quaternion)")
-    return ref
 
 
 def _gains(name: str, value: Any, size: int) -> np.ndarray | None:
@@ -105,11 +84,15 @@ class StationPID(Controller):
             resolved-rate inverse kinematics relative to the station (the vehicle at its reference
             pose), gain ``ik_gain`` [1/s], damping ``ik_damping`` [m]; otherwise
             ``arm_trajectory`` (joint waypoints) or the initial angles.
-        base_reference: the station (x, y, z [m] world, qw, qx, qy, qz); default the first
-            measurement's vehicle pose (the scenario's ``vehicle.setpoint``).
+        base_reference: the station (x, y, z [m] world, qw, qx, qy, qz; the scenario's
+            ``vehicle.setpoint``); default the first measurement's vehicle position, its attitude
+            by ``station_attitude``.
         base_trajectory: the vehicle origin's path (``position(t)``, ``velocity(t)``, world [m],
             [m/s]; the scenario's ``vehicle.trajectory``): p_d(t) and, in the D term, v_d(t)
             (F = Kp e_p + Ki sum(e_p) T + Kd (v_d - v)); the orientation stays the station's.
+        station_attitude: the default station's attitude: "level" (default: roll = pitch = 0 at
+            the measured yaw) | "measured" (the first measurement's as it is;
+            :mod:`uvms_mj.control.station`).
     """
 
     robots = "floating"
@@ -120,14 +103,12 @@ class StationPID(Controller):
                  integral_time: float = 5.0, kp_position=None, kd_position=None, ki_position=None,
                  kp_attitude=None, kd_attitude=None, ki_attitude=None, kp_joints=None, kd_joints=None,
                  integral_limit: float = 0.5, feedforward: bool = True, base_reference=None,
-                 base_trajectory=None) -> None:
+                 base_trajectory=None, station_attitude: str | None = None) -> None:
         if not isinstance(robot, NominalRobot):
             raise ControllerError("station_pid needs robot= a NominalRobot (a floating robot scenario)")
         self.base_reference = check_base_reference(base_reference)
-        if base_trajectory is not None and not (hasattr(base_trajectory, "position")
-                                                and hasattr(base_trajectory, "velocity")):
-            raise ControllerError(f"base_trajectory = {base_trajectory!r} must have position(t) and velocity(t)")
-        self.base_trajectory = base_trajectory
+        self.base_trajectory = check_base_trajectory(base_trajectory, velocity=True)
+        self.station_attitude = check_station_attitude(station_attitude, bool(robot.layout.base_free), self.base_reference)
         self.robot = robot
         self.T = check_positive("T", T)
         self.bandwidth_base = check_positive("bandwidth_base", bandwidth_base)
@@ -168,7 +149,7 @@ class StationPID(Controller):
     def reset(self, measurement: Measurement) -> None:
         r, lay = self.robot, self.robot.layout
         q = np.asarray(measurement.q, dtype=float)
-        self.p_ref, self.quat_ref, self.R_ref, self.q_joint0 = station_reference(q, lay, self.base_reference)
+        self.p_ref, self.quat_ref, self.R_ref, self.q_joint0 = station_reference(q, lay, self.base_reference, self.station_attitude)
         M = r.mass_matrix(q)
         d = lay.base_dadr
         mb = np.diag(M)[d:d + 6]

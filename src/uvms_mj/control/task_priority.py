@@ -26,8 +26,12 @@ Each task's reference velocity is the closed-loop inverse kinematics (CLIK) one 
 "kinematic control", sigma_dot_r = sigma_dot_d + Lambda sigma~), on the MEASURED task values:
 
     v_1 = p_dot_d(t) + gain_tip (p_d(t) - p_tip)
-    v_2 = gain_attitude log(R_d R^T)                       (R_d: initial attitude)
-    v_3 = [gain_position (p_v,d - p_v);  posture_weight (q_dot_d + gain_posture (q_d - q))]
+    v_2 = gain_attitude log(R_d R^T)                       (R_d: the station's attitude)
+    v_3 = [p_dot_v,d(t) + gain_position (p_v,d(t) - p_v);  posture_weight (q_dot_d + gain_posture (q_d - q))]
+
+with the station (p_v,d, R_d) = ``base_reference``, else the first measurement's position with a
+level attitude at its yaw (``station_attitude``, :mod:`uvms_mj.control.station`), and, with a
+``base_trajectory``, p_v,d(t), p_dot_v,d(t) its position and velocity (else constant, 0).
 
 and the reference zeta_r by the recursive task-priority solution (``priority_form``):
 
@@ -104,7 +108,8 @@ from uvms_mj.control.nominal import JointTrajectory, NominalRobot
 from uvms_mj.physics.thrusters import Allocator
 from uvms_mj.control.base import Command, Controller, ControllerError, Measurement, check_positive, register
 from uvms_mj.rotations import quat_to_mat, rotation_log
-from uvms_mj.control.station_pid import DEFAULT_T, check_base_reference, station_reference
+from uvms_mj.control.station import check_base_reference, check_base_trajectory, check_station_attitude, station_reference
+from uvms_mj.control.station_pid import DEFAULT_T
 
 #: The priority forms (module docstring).
 PRIORITY_FORMS = ("siciliano_slotine", "singularity_robust")
@@ -263,8 +268,14 @@ class TaskPriority(Controller):
             0.1 bounded the loop's integral action below the moment of a 1 % buoyancy error,
             leaving a 4 deg attitude offset in the sweep study).
         feedforward: add the nominal hold force.
-        base_reference: the vehicle pose to hold (x, y, z [m] world, qw, qx, qy, qz); default the
-            first measurement's (the scenario's ``vehicle.setpoint``).
+        base_reference: the vehicle pose to hold (x, y, z [m] world, qw, qx, qy, qz; the
+            scenario's ``vehicle.setpoint``); default the first measurement's position, its
+            attitude by ``station_attitude``.
+        base_trajectory: the vehicle origin's path (``position(t)``, ``velocity(t)``, world [m],
+            [m/s]; the scenario's ``vehicle.trajectory``): task 3's p_v,d(t) with the
+            feed-forward p_dot_v,d(t); the attitude stays the station's.
+        station_attitude: the default station's attitude: "level" (default: roll = pitch = 0 at
+            the measured yaw) | "measured" (:mod:`uvms_mj.control.station`).
     """
 
     robots = "floating"
@@ -276,13 +287,16 @@ class TaskPriority(Controller):
                  dls_threshold: float = 1e-2, dls_damping: float = 5e-2, rank_tol: float = 1e-10,
                  bandwidth_base: float = 2.0, bandwidth_attitude: float = 3.0, bandwidth_joints: float = 10.0,
                  damping_ratio: float = 1.0, kp=None, kd=None, reference_lead_limit: float = 1.0,
-                 feedforward: bool = True, base_reference=None) -> None:
+                 feedforward: bool = True, base_reference=None, base_trajectory=None,
+                 station_attitude: str | None = None) -> None:
         if not isinstance(robot, NominalRobot):
             raise ControllerError("task_priority needs robot= a NominalRobot (a floating robot scenario)")
         self.base_reference = check_base_reference(base_reference)
+        self.base_trajectory = check_base_trajectory(base_trajectory, velocity=True)
         lay = robot.layout
         if not lay.base_free:
             raise ControllerError("task_priority needs a floating robot (a free-joint vehicle)")
+        self.station_attitude = check_station_attitude(station_attitude, True, self.base_reference)
         if lay.tip_site < 0:
             raise ControllerError("task_priority needs an end-effector site (tip_site)")
         self.robot = robot
@@ -337,7 +351,8 @@ class TaskPriority(Controller):
         p_d, v_d = self._tip_desired(t)
         e_tip = p_d - jac["tip"]                                    # world [m]
         e_att = rotation_log(self.R_ref @ jac["R_base"].T)          # world rotation vector [rad]
-        e_pos = self.p_ref - q[a:a + 3]                             # world [m]
+        pv_d, vv_d = self._base_desired(t)
+        e_pos = pv_d - q[a:a + 3]                                   # world [m]
         qj_d, qdj_d = self._posture(t)
         e_post = qj_d - q[lay.joint_qadr]                           # [rad]
         J1 = jac["tip_p"]
@@ -348,14 +363,21 @@ class TaskPriority(Controller):
         # CLIK reference velocities sigma_dot_d + Lambda sigma~ (Antonelli ch. 9, kinematic control)
         v1 = v_d + self.gain_tip * e_tip
         v2 = self.gain_attitude * e_att
-        v_pos = self.gain_position * e_pos
+        v_pos = vv_d + self.gain_position * e_pos
         v_post = w * (qdj_d + self.gain_posture * e_post)
         errors = {"e_tip": e_tip, "e_attitude": e_att, "e_position": e_pos, "e_posture": e_post,
-                  "tip_desired": p_d}
+                  "tip_desired": p_d, "base_desired": pv_d}
         if self.posture_level == "below_position":  # a 4th level: posture strictly below position
             return [(J1, v1), (J2, v2), (jac["base_p"], v_pos), (w * S, v_post)], errors
         J3 = np.vstack((jac["base_p"], w * S))
         return [(J1, v1), (J2, v2), (J3, np.concatenate((v_pos, v_post)))], errors
+
+    def _base_desired(self, t: float) -> tuple[np.ndarray, np.ndarray]:
+        """The vehicle origin's desired position and velocity at t (world [m], [m/s])."""
+        if self.base_trajectory is None:
+            return self.p_ref, np.zeros(3)
+        return (np.asarray(self.base_trajectory.position(t), dtype=float).reshape(3),
+                np.asarray(self.base_trajectory.velocity(t), dtype=float).reshape(3))
 
     def _tip_desired(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         if self.trajectory is None:
@@ -375,7 +397,7 @@ class TaskPriority(Controller):
     def reset(self, measurement: Measurement) -> None:
         r, lay, d = self.robot, self.robot.layout, self.d
         q = np.asarray(measurement.q, dtype=float).copy()
-        self.p_ref, self.quat_ref, self.R_ref, self.q_joint0 = station_reference(q, lay, self.base_reference)
+        self.p_ref, self.quat_ref, self.R_ref, self.q_joint0 = station_reference(q, lay, self.base_reference, self.station_attitude)
         M = r.mass_matrix(q)
         self.tip0 = r.jacobians()["tip"].copy()
         m = np.diag(M)
@@ -434,7 +456,7 @@ class TaskPriority(Controller):
             thrust, saturated, achieved = np.zeros(0), np.zeros(0, dtype=bool), np.zeros(6)
         tau = np.clip(u[r.motor_dofs], r.motor_lo, r.motor_hi)
         signals = {
-            "base_desired": np.concatenate((self.p_ref, self.quat_ref)),
+            "base_desired": np.concatenate((err["base_desired"], self.quat_ref)),
             "tip_desired": err["tip_desired"],
             "tip_measured": jac["tip"].copy(),
             "zeta_ref": zeta_r.copy(),

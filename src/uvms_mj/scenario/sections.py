@@ -240,7 +240,8 @@ class Setpoint(_Section):
 class Vehicle(_Section):
     """What the vehicle is to do: hold a setpoint, or follow a trajectory of its origin."""
 
-    setpoint: Setpoint | None = Field(None, description="the pose to hold; null: the first measurement's")
+    setpoint: Setpoint | None = Field(None, description="the pose to hold; null: the first measurement's "
+                                        "(a floating vehicle's position and yaw, level: station_attitude)")
     trajectory: dict[str, Any] | None = Field(
         None, description="the vehicle origin's path (world; uvms_mj.control.trajectories kinds), started at "
         "the setpoint (or the initial position); for controllers that take base_trajectory")
@@ -277,7 +278,8 @@ def _takers(param: str) -> list[str]:
 def vehicle_issues(vehicle: Vehicle, controller: str, params: dict | None = None) -> list:
     """Problems of the vehicle section with the scenario's controller: a setpoint needs a
     controller taking ``base_reference``, a trajectory one taking ``base_trajectory``; neither
-    may be given twice (section and controller.params)."""
+    may be given twice (section and controller.params), nor a setpoint with
+    ``controller.params.station_attitude`` (:mod:`uvms_mj.control.station`)."""
     from uvms_mj.scenario.base import _controller_signature
 
     try:
@@ -295,6 +297,9 @@ def vehicle_issues(vehicle: Vehicle, controller: str, params: dict | None = None
         elif params and params.get(param) is not None:
             issues.append((("vehicle", field), f"give either vehicle.{field} or controller.params.{param}, not both",
                            _NO))
+    if vehicle.setpoint is not None and params and params.get("station_attitude") is not None:
+        issues.append((("vehicle", "setpoint"), "give either vehicle.setpoint or controller.params.station_attitude "
+                       "(the attitude of the default station, without a setpoint), not both", _NO))
     return issues
 
 
