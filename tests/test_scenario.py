@@ -247,9 +247,11 @@ def test_both_target_and_displacement(tmp_path):
 
 
 def test_non_finite_numbers(tmp_path):
-    msg = error_of(tmp_path, "duration: .nan\nplant:\n  current: [.inf, 0]\n  overrides: {base.volume: .nan}\n"
-                             "controller:\n  params: {tf: .inf}\nsensors: {position_noise: -.inf}\n")
-    for path in ("duration", "plant.current[0]", "plant.overrides.base.volume", "controller.params.tf",
+    msg = error_of(tmp_path, "duration: .nan\nplant:\n  overrides: {base.volume: .nan}\n"
+                             "controller:\n  params: {tf: .inf}\nsensors: {position_noise: -.inf}\n"
+                             "current: {velocity: [.inf, 0]}\n")
+    # (the robot's own checks of a section, e.g. its overrides, run once the section's fields are valid)
+    for path in ("duration", "current.velocity[0]", "plant.overrides.base.volume", "controller.params.tf",
                  "sensors.position_noise"):
         assert any(line.split(": ")[1] == path and "finite" in line for line in msg.splitlines()), (path, msg)
 

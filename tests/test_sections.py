@@ -197,10 +197,14 @@ def test_validate_resolved_prints_a_valid_scenario(tmp_path):
 
 
 def test_a_section_of_the_other_robot_kind_says_so(tmp_path):
-    """One schema for every robot: a key the paper's robot does not take but an MJCF robot does
-    (and the other way round) is named as such, not as an unknown key."""
-    with pytest.raises(ScenarioError, match=r"arm: 'arm' applies to MJCF robots .*not to the paper's robot"):
-        _load(tmp_path, "arm: {waypoints: []}\n")
+    """One schema for every robot: a value that applies to one robot kind only says so in one
+    line; a controller refuses what it does not do (rac follows the tip, not arm waypoints)."""
+    with pytest.raises(ScenarioError, match=r"arm: rac moves the arm by the tip task"):
+        _load(tmp_path, "arm: {waypoints: [{t: 1.0, joints: {joint1: 10}}]}\n")
+    sc = _load(tmp_path, "arm: {waypoints: [{t: 1.0, joints: {joint1: 10}}]}\ncontroller: {name: station_pid}\n"
+                         "control_period: 0.025\n"
+                         "trajectory: null\n")
+    assert sc.robot == "paper" and sc.arm.waypoints[0].joints == {"joint1": 10}
     with pytest.raises(ScenarioError, match=r"plant\.model_mismatch: applies to the paper's robot only"):
         _load(tmp_path, "robot: bluerov2_heavy\nplant: {model_mismatch: true}\n")
     with pytest.raises(ScenarioError, match=r"plant\.hydro\.added_mass: 'lagged' applies to the paper's robot only"):

@@ -52,7 +52,7 @@ class TaskPD(RAC):
     def __init__(self, trajectory=None, robot: NominalRobot | None = None, T: float = PAPER_T, omega: float = 2.0,
                  zeta: float = 1.0, allocation: str = "auto", base_reference=None, base_trajectory=None,
                  arm_trajectory=None, station_attitude: str | None = None) -> None:
-        if arm_trajectory is not None:
+        if arm_trajectory is not None and len(getattr(arm_trajectory, "times", ())):
             raise ControllerError("pd follows a tip trajectory, not arm joint waypoints (arm_trajectory)")
         super().__init__(trajectory=trajectory, robot=robot, T=T, allocation=allocation,
                          base_reference=base_reference, base_trajectory=base_trajectory,

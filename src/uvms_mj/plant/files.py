@@ -11,7 +11,7 @@ from pathlib import Path
 
 from uvms_mj.plant.errors import ParameterError
 
-__all__ = ["BUILTIN_ROBOTS", "default_model_path", "models_dir", "robot_path"]
+__all__ = ["BUILTIN_ROBOTS", "ROBOT_FILES", "default_model_path", "models_dir", "nominal_model_path", "robot_path"]
 
 _PKG = Path(__file__).resolve().parents[1]  # the uvms_mj package folder
 
@@ -61,3 +61,22 @@ def robot_path(robot: str | Path, base_dir: str | Path | None = None) -> Path:
     hint = f" (did you mean {close[0]!r}?)" if close else ""
     raise ParameterError(f"robot = {key!r}: neither a built-in robot{hint} ({', '.join(BUILTIN_ROBOTS)}) "
                          "nor an existing MJCF file")
+
+
+#: Built-in robots whose robot file is separate from the scene they run in (mujoco_menagerie's
+#: convention): name -> the robot file in ``models/`` (the paper's ``models/paper/scene.xml``
+#: includes ``models/uvms.xml``). The others' files are the robot itself.
+ROBOT_FILES: dict[str, str] = {"paper": "uvms.xml"}
+
+
+def nominal_model_path(robot: str | Path, base_dir: str | Path | None = None) -> Path:
+    """The robot's own model file, without its scene: what the controller's nominal model reads
+    (:class:`uvms_mj.control.nominal.NominalRobot`); :data:`ROBOT_FILES`, else :func:`robot_path`.
+
+    Raises:
+        ParameterError: as :func:`robot_path`.
+    """
+    key = str(robot)
+    if key in ROBOT_FILES:
+        return models_dir() / ROBOT_FILES[key]
+    return robot_path(robot, base_dir)

@@ -152,6 +152,24 @@ def _controller_signature(name: str) -> tuple[dict[str, inspect.Parameter], bool
     return named, any(p.kind == p.VAR_KEYWORD for p in sig.parameters.values())
 
 
+def takes_argument(name: str, arg: str) -> bool:
+    """Whether controller ``name``'s factory takes keyword ``arg`` (by name or **kwargs), the
+    arguments the scenario gives included."""
+    try:
+        params = inspect.signature(_factory(name)).parameters
+    except (TypeError, ValueError):
+        return True
+    return arg in params or any(p.kind == p.VAR_KEYWORD for p in params.values())
+
+
+def named_argument(name: str, arg: str) -> bool:
+    """Whether controller ``name``'s factory names keyword ``arg`` in its signature."""
+    try:
+        return arg in inspect.signature(_factory(name)).parameters
+    except (TypeError, ValueError):
+        return False
+
+
 def creation_errors(make: Callable[[dict], Any], params: dict) -> list[tuple[tuple, str, Any]]:
     """The errors ``make(params)`` raises (ControllerError, ValueError, TypeError), each
     attributed to the parameter that causes it alone (found by calling ``make`` with it alone):
@@ -202,11 +220,11 @@ class NominalSection(_Section):
 
 
 class ControllerSection(_Section):
-    """A registered controller, its keyword parameters and the base's reference, for every robot
-    (each robot kind gives its default name: :class:`uvms_mj.scenario.paper.PaperControllerSection`,
-    :class:`uvms_mj.scenario.robot.RobotControllerSection`)."""
+    """A registered controller, its keyword parameters and the base's reference, for every robot."""
 
-    name: str = Field(description="one of uvms_mj.control.available()")
+    name: str | None = Field(None, description="one of uvms_mj.control.available(); null: the robot's default "
+                             "(uvms_mj.scenario.document.DEFAULT_CONTROLLER: rac_dob on the paper's robot, "
+                             "station_pid on others)")
     params: dict[str, Any] = Field(default_factory=dict, description="keyword arguments of the controller")
     base_reference: Literal["measured", "truth", "nominal"] = Field(
         "measured", description="the base's reference pose: the first (noisy) measurement, the plant's true "

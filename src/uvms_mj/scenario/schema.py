@@ -1,13 +1,12 @@
 """Scenario files: loading, validation, resolution, building and running, for every robot.
 
-A scenario is a YAML mapping (read with a safe loader: no aliases, bounded size and depth) whose
-``robot`` field picks its schema: the paper's robot (``robot: paper``, the default;
-:mod:`uvms_mj.scenario.paper`, where the format is documented) or any MJCF robot
-(:mod:`uvms_mj.scenario.robot`); both share the sections of :mod:`uvms_mj.scenario.sections`
-(initial state, current, thruster failures, vehicle setpoint) and the helpers of
-:mod:`uvms_mj.scenario.base`. :func:`load_scenario` / :func:`validate_scenario` give a validated
-scenario of either kind; :func:`build`, :func:`run_scenario`, :func:`resolved` and
-:func:`controller_period` take either.
+A scenario is a YAML mapping (read with a safe loader: no aliases, bounded size and depth)
+validated by the one schema, :class:`uvms_mj.scenario.document.Scenario` (where the format is
+documented); its sections (:mod:`uvms_mj.scenario.sections`, :mod:`uvms_mj.scenario.paths`,
+:mod:`uvms_mj.scenario.base`) apply to every robot, and the paper's robot and MJCF robots add
+their own defaults and checks (:mod:`uvms_mj.scenario.paper`, :mod:`uvms_mj.scenario.robot`).
+:func:`load_scenario` / :func:`validate_scenario` give a validated scenario; :func:`build`,
+:func:`run_scenario`, :func:`resolved` and :func:`controller_period` take any.
 
 Overrides from the command line (``sets``) are ``key.path=value`` strings, the value parsed as
 YAML (``controller.name=rac``, ``trajectory.displacement=[0.2,0]``, ``plant.current=[0.1,0]``,
@@ -21,7 +20,6 @@ from __future__ import annotations
 import copy
 import inspect
 import re
-from functools import lru_cache
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
@@ -34,14 +32,15 @@ from uvms_mj.control import ControllerError, create
 from uvms_mj.physics.terms import HydroTerms
 from uvms_mj.sim.loop import RunResult, run_closed_loop
 from uvms_mj.control.nominal import NominalRobot
-from uvms_mj.control.trajectories import Line3D
 from uvms_mj.plant.params import (
     ParameterError,
     RobotParams,
-    compile_robot,
     read_params,
 )
-from uvms_mj.plant.plant import Plant, models_dir
+from uvms_mj.plant.files import nominal_model_path, robot_path
+from uvms_mj.plant.layout import InitialState
+from uvms_mj.plant.plant import Plant
+from uvms_mj.scenario.paths import tip_path
 from uvms_mj.scenario.sections import vehicle_params
 from uvms_mj.scenario.base import (  # noqa: F401  (LAG_STABILITY, log_path, sensor_model: importable from here as before)
     _NO_VALUE,
@@ -54,6 +53,8 @@ from uvms_mj.scenario.base import (  # noqa: F401  (LAG_STABILITY, log_path, sen
     _Issues,
     _jsonable,
     _suggest,
+    named_argument,
+    takes_argument,
 )
 
 __all__ = [
@@ -72,21 +73,29 @@ __all__ = [
 ]
 
 
-from uvms_mj.scenario.paper import (  # noqa: F401  (the paper schema's names, importable from here as before)
-    _fmt_path,
-    _fmt_value,
-    OVERRIDE_NAMES,
-    paper_controller_period,
-    _robot_file_model,
-    Scenario,
-)
+from uvms_mj.scenario.document import Scenario, controller_period  # noqa: F401  (importable from here)
+
+
+def _fmt_value(v: Any) -> str:
+    s = repr(v)
+    return s if len(s) <= 80 else s[:77] + "..."
+
+
+def _fmt_path(loc: Sequence) -> str:
+    out = ""
+    for part in loc:
+        if isinstance(part, int) and not isinstance(part, bool):
+            out += f"[{part}]"
+        else:
+            out += ("." if out else "") + str(part)
+    return out or "(top level)"
 
 
 # --------------------------------------------------------------------------- validation, loading
 
-def _model_at(loc: Sequence, root: type[BaseModel] | None = None) -> type[BaseModel] | None:
+def _model_at(loc: Sequence) -> type[BaseModel] | None:
     """The section model at a location (for the allowed keys of an unknown-key error)."""
-    model: Any = root or Scenario
+    model: Any = Scenario
     for part in loc:
         if not (isinstance(model, type) and issubclass(model, BaseModel)):
             return None
@@ -94,10 +103,13 @@ def _model_at(loc: Sequence, root: type[BaseModel] | None = None) -> type[BaseMo
         if f is None:
             return None
         model = f.annotation
+        args = [a for a in getattr(model, "__args__", ()) if isinstance(a, type) and issubclass(a, BaseModel)]
+        if args:  # X | None
+            model = args[0]
     return model if isinstance(model, type) and issubclass(model, BaseModel) else None
 
 
-def _format(exc: ValidationError, source: str, root: type[BaseModel] | None = None) -> str:
+def _format(exc: ValidationError, source: str) -> str:
     lines = []
     for err in exc.errors():
         loc = tuple(err["loc"])
@@ -108,12 +120,8 @@ def _format(exc: ValidationError, source: str, root: type[BaseModel] | None = No
                 lines.append(f"{source}: {_fmt_path(loc + tuple(sub))}: {msg}{got}")
             continue
         if err["type"] == "extra_forbidden":
-            model = _model_at(loc[:-1], root)
+            model = _model_at(loc[:-1])
             allowed = [k for k, f in model.model_fields.items() if not f.exclude] if model else []
-            other = _other_schema_has(loc, root)
-            if other:
-                lines.append(f"{source}: {_fmt_path(loc)}: {other}")
-                continue
             lines.append(f"{source}: {_fmt_path(loc)}: unknown key {loc[-1]!r}{_suggest(loc[-1], allowed)}; allowed: "
                          + ", ".join(allowed))
             continue
@@ -122,60 +130,28 @@ def _format(exc: ValidationError, source: str, root: type[BaseModel] | None = No
     return "\n".join(lines)
 
 
-def _other_schema_has(loc: tuple, root: type[BaseModel] | None) -> str:
-    """Where a key unknown to this robot's schema belongs to the other one: the line saying so
-    (one schema for every robot, whose sections apply where they make sense), else ""."""
-    from uvms_mj.scenario.robot import RobotScenario
-
-    robot_side = root is RobotScenario
-    other = Scenario if robot_side else RobotScenario
-    model = _model_at(loc[:-1], other)
-    if model is None or loc[-1] not in model.model_fields:
-        return ""
-    if robot_side:
-        return (f"{loc[-1]!r} applies to the paper's robot (robot: paper) only; MJCF robots take: "
-                + ", ".join(k for k, f in (_model_at(loc[:-1], root) or RobotScenario).model_fields.items()
-                            if not f.exclude))
-    return (f"{loc[-1]!r} applies to MJCF robots (robot: bluerov2_alpha, a model file...), not to the paper's "
-            "robot; it takes: " + ", ".join(k for k, f in (_model_at(loc[:-1], root) or Scenario).model_fields.items()
-                                          if not f.exclude))
-
-
-def is_robot_scenario(scenario: Any) -> bool:
-    """Whether a validated scenario is for a floating robot (``robot`` other than "paper")."""
-    return type(scenario).__name__ == "RobotScenario"
-
-
-def validate_scenario(data: Any, source: str = "<scenario>", base_dir: str | Path | None = None):
-    """Validate a raw mapping; raise :class:`ScenarioError` naming ``source`` on any problem.
-
-    A mapping whose ``robot`` is absent or "paper" is a paper scenario (:class:`Scenario`);
-    any other robot (a built-in name or an MJCF path, relative to ``base_dir``) gives a
-    :class:`uvms_mj.scenario.robot.RobotScenario`."""
+def validate_scenario(data: Any, source: str = "<scenario>", base_dir: str | Path | None = None) -> Scenario:
+    """Validate a raw mapping (:class:`Scenario`, any robot); raise :class:`ScenarioError`
+    naming ``source`` on any problem. ``base_dir``: the scenario file's folder (a robot, an
+    overrides file or a csv trajectory given as a relative path is found there)."""
     if data is None:
         data = {}
     if not isinstance(data, dict):
         raise ScenarioError(f"{source}: a scenario must be a mapping of keys to values, got {_fmt_value(data)}")
+    if "base_dir" in data:
+        raise ScenarioError(f"{source}: base_dir: unknown key 'base_dir' (set by the loader)")
+    from uvms_mj.plant.files import BUILTIN_ROBOTS
+
     robot = data.get("robot", "paper")
-    if robot != "paper":
-        from uvms_mj.scenario.robot import RobotScenario
-
-        if "base_dir" in data:
-            raise ScenarioError(f"{source}: base_dir: unknown key 'base_dir' (set by the loader)")
-        from uvms_mj.plant.files import BUILTIN_ROBOTS
-
-        # The scenario file's folder matters only for a robot given as a relative path.
-        plant = data.get("plant") if isinstance(data.get("plant"), dict) else {}
-        traj = data.get("trajectory") if isinstance(data.get("trajectory"), dict) else {}
-        if base_dir is not None and (not isinstance(robot, str) or robot in BUILTIN_ROBOTS) \
-                and plant.get("overrides_file") is None and traj.get("kind") != "csv":
-            base_dir = None
-        try:
-            return RobotScenario.model_validate({**data, "base_dir": None if base_dir is None else str(base_dir)})
-        except ValidationError as exc:
-            raise ScenarioError(_format(exc, source, RobotScenario)) from None
+    # The scenario file's folder matters only for what is given as a relative path.
+    plant = data.get("plant") if isinstance(data.get("plant"), dict) else {}
+    traj = data.get("trajectory") if isinstance(data.get("trajectory"), dict) else {}
+    curve = traj.get("curve") if isinstance(traj.get("curve"), dict) else {}
+    if base_dir is not None and (not isinstance(robot, str) or robot in BUILTIN_ROBOTS) \
+            and plant.get("overrides_file") is None and "csv" not in (traj.get("kind"), curve.get("kind")):
+        base_dir = None
     try:
-        return Scenario.model_validate(data)
+        return Scenario.model_validate({**data, "base_dir": None if base_dir is None else str(base_dir)})
     except ValidationError as exc:
         raise ScenarioError(_format(exc, source)) from None
 
@@ -332,8 +308,10 @@ def apply_scenario_sets(raw: dict, sets: Sequence[str]) -> dict:
 
 
 def _controller_name(raw: dict) -> Any:
+    from uvms_mj.scenario.document import DEFAULT_CONTROLLER
+
     c = raw.get("controller")
-    default = "station_pid" if raw.get("robot", "paper") != "paper" else "rac_dob"
+    default = DEFAULT_CONTROLLER["paper" if raw.get("robot", "paper") == "paper" else None]
     return c.get("name", default) if isinstance(c, dict) else default
 
 
@@ -381,136 +359,120 @@ def dump_yaml(scenario: Scenario) -> str:
 # --------------------------------------------------------------------------- resolution, build, run
 
 
-def controller_period(scenario) -> float:
-    """The controller period T [s]: controller.params.T, else the controller's default (paper
-    scenarios) or the scenario's control_period (robot scenarios)."""
-    if is_robot_scenario(scenario):
-        from uvms_mj.scenario import robot as robot_scenario
-
-        return robot_scenario.robot_controller_period(scenario)
-    return paper_controller_period(scenario)
-
-
 def drag_model(scenario: Scenario) -> str:
-    """The plant's drag model with the default resolved."""
+    """The plant's drag model with the default resolved (the paper's robot: ``mujoco`` with its
+    model mismatch, else ``strip``; others ``strip``)."""
     d = scenario.plant.hydro.drag
     return d if d is not None else ("mujoco" if scenario.plant.model_mismatch else "strip")
 
 
-@lru_cache(maxsize=1)
-def _truth() -> dict:
-    from uvms_mj.sim.experiment import truth_overrides
-
-    return truth_overrides()
-
-
 def plant_overrides(scenario: Scenario) -> dict:
-    """Every parameter override the plant gets: the truth differences (if model_mismatch), then
-    plant.overrides, then the thrusters section."""
-    over = copy.deepcopy(_truth()) if scenario.plant.model_mismatch else {}
-    over.update(copy.deepcopy(scenario.plant.overrides))
-    th = scenario.thrusters
-    over["thrusters.tau"] = th.tau
-    over["thrusters.force_range"] = list(th.force_range)
-    over["thrusters.dead_zone"] = list(th.dead_zone) if isinstance(th.dead_zone, list) else list(th.dead_zone_band)
-    return over
+    """Every parameter override the plant gets (:func:`uvms_mj.scenario.paper.paper_plant_overrides`
+    on the paper's robot, :func:`uvms_mj.scenario.robot.mjcf_plant_overrides` on others)."""
+    from uvms_mj.scenario.paper import paper_plant_overrides
+    from uvms_mj.scenario.robot import mjcf_plant_overrides
+
+    return paper_plant_overrides(scenario) if scenario.robot == "paper" else mjcf_plant_overrides(scenario)
 
 
 def nominal_params(scenario: Scenario) -> RobotParams:
-    """The controller's parameters: the robot model FILE plus nominal.overrides (never the plant)."""
-    if not scenario.nominal.overrides:
-        return read_params(_robot_file_model())
+    """The paper robot's controller parameters (:class:`uvms_mj.plant.params.RobotParams`): its
+    model FILE plus nominal.overrides (never the plant)."""
     from uvms_mj.plant.robot import compile_robot_spec
 
-    return read_params(compile_robot_spec(models_dir() / "uvms.xml", scenario.nominal.overrides))
+    return read_params(compile_robot_spec(nominal_model_path(scenario.robot), scenario.nominal.overrides))
 
 
 def nominal_robot(scenario: Scenario) -> NominalRobot:
-    """The controller's own model (:class:`uvms_mj.control.nominal.NominalRobot`): the robot
-    model FILE (``models/uvms.xml``) plus nominal.overrides, with or without gravity and
-    buoyancy (nominal.gravity); never the plant."""
-    return NominalRobot(models_dir() / "uvms.xml", scenario.nominal.overrides, gravity=scenario.nominal.gravity)
+    """The controller's own model (:class:`uvms_mj.control.nominal.NominalRobot`): the robot's
+    model FILE (:func:`uvms_mj.plant.files.nominal_model_path`: the paper's ``models/uvms.xml``)
+    plus nominal.overrides, with or without gravity and buoyancy (nominal.gravity); never the
+    plant."""
+    return NominalRobot(nominal_model_path(scenario.robot, scenario.base_dir), scenario.nominal.overrides,
+                        gravity=scenario.nominal.gravity, tip_site=scenario.tip_site)
+
+
+def _controller_defaults(scenario: Scenario) -> dict:
+    """The controller's keyword defaults (the paper robot's PAPER_DEFAULTS on it), without
+    the arguments the scenario supplies."""
+    named, _ = _controller_signature(scenario.controller.name)
+    params = {k: p.default for k, p in named.items() if p.default is not inspect.Parameter.empty}
+    if scenario.robot == "paper":
+        params.update(getattr(_factory(scenario.controller.name), "PAPER_DEFAULTS", {}))
+    return params
 
 
 def resolved(scenario: Scenario) -> dict:
     """The fully resolved scenario, JSON-serialisable (for log metadata): every default filled
     in, the drag model and log path resolved, the controller's parameters completed with the
     controller's own defaults. It is itself a valid scenario describing the same run."""
-    if is_robot_scenario(scenario):
-        from uvms_mj.scenario import robot as robot_scenario
-
-        return robot_scenario.resolve_robot_scenario(scenario)
     d = scenario.model_dump(mode="json")
     d["plant"]["hydro"]["drag"] = drag_model(scenario)
     d["outputs"]["log"] = log_path(scenario).as_posix()
-    named, _ = _controller_signature(scenario.controller.name)
-    params = {k: p.default for k, p in named.items() if p.default is not inspect.Parameter.empty}
-    params.update(getattr(_factory(scenario.controller.name), "PAPER_DEFAULTS", {}))
+    named, var_kw = _controller_signature(scenario.controller.name)
+    params = _controller_defaults(scenario)
     params.update(scenario.controller.params)
+    T = controller_period(scenario)
     if "T" in named or "T" in params:
-        params["T"] = controller_period(scenario)
+        params["T"] = T
+    d["control_period"] = T
     d["controller"]["params"] = _jsonable(params)
     return _jsonable(d)
 
 
 def build(scenario: Scenario) -> tuple[Plant, Any]:
-    """The plant (truth) and the controller of a scenario.
+    """The plant (truth) and the controller of a scenario, for any robot.
 
     Raises:
         ScenarioError: a combination that only fails when built (e.g. overrides that conflict
             with the truth differences); the message names the scenario.
     """
-    if is_robot_scenario(scenario):
-        from uvms_mj.scenario import robot as robot_scenario
-
-        return robot_scenario.build_robot_scenario(scenario)
+    sc = scenario
     try:
-        ph, pl, th = scenario.physics, scenario.plant, scenario.thrusters
+        ph, pl, th = sc.physics, sc.plant, sc.thrusters
         plant = Plant(
-            overrides=plant_overrides(scenario),
-            terms=HydroTerms(added_mass=pl.hydro.added_mass, drag=drag_model(scenario), buoyancy=pl.hydro.buoyancy),
+            robot_path(sc.robot, sc.base_dir),
+            overrides=plant_overrides(sc),
+            terms=HydroTerms(added_mass=pl.hydro.added_mass, drag=drag_model(sc), buoyancy=pl.hydro.buoyancy),
             gravity=pl.gravity,
-            current=scenario.current.current(scenario.seed) if scenario.current is not None else tuple(pl.current),
-            dead_zone=bool(th.dead_zone),  # (a band: the plant's parameters carry it, above)
+            current=(sc.current.current(sc.seed) if sc.current is not None
+                     else tuple(pl.current) if pl.current is not None else None),
+            # the paper's thrusters: the plant's dead-zone switch (the band is in its parameters, above);
+            # MJCF thrusters: the thruster plugin's band (an override, above)
+            dead_zone=bool(th.dead_zone) if sc.robot == "paper" else False,
             timestep=ph.timestep,
             integrator=ph.integrator,
             backend=None if ph.backend == "auto" else ph.backend,
-            initial=scenario.initial.state(),
+            initial=sc.initial.state(),
+            tip_site=sc.tip_site,
             failures=[f.failure() for f in th.failures],
             payload=pl.payload.payload() if pl.payload is not None else None,
         )
-        robot = nominal_robot(scenario)
-        tr = scenario.trajectory
-        start = robot.tip_at(plant.q)  # the initial tip (x, y) on the nominal model's geometry
-        target = np.asarray(tr.target, dtype=float) if tr.target is not None else start + np.asarray(tr.displacement)
-        path = Line3D(start=(*start.tolist(), 0.0), target=(*target.tolist(), 0.0), cruise_speed=tr.cruise_speed,
-                      accel=tr.accel, t_start=tr.t_start)
-        if tr.curve is not None:
-            from uvms_mj.control.trajectories import make_trajectory, starting_at
-
-            path = starting_at(make_trajectory(tr.curve), np.r_[start, 0.0])
-        params = dict(scenario.controller.params)
-        ref = scenario.controller.base_reference
-        if ref == "truth":
-            params["base_reference"] = [float(v) for v in plant.q[:3]]
-        elif ref == "nominal":
-            params["base_reference"] = [float(v) for v in _nominal_initial_pose()]
-        params.update(vehicle_params(scenario.vehicle, plant))
-        ctrl = create(scenario.controller.name, trajectory=path, robot=robot, **params)
-    except (ParameterError, ControllerError, ValueError) as exc:
-        raise ScenarioError(f"scenario {scenario.name!r}: {exc}") from None
+        robot = nominal_robot(sc)
+        name = sc.controller.name
+        params = dict(sc.controller.params)
+        if takes_argument(name, "T"):
+            params["T"] = controller_period(sc)
+        if takes_argument(name, "trajectory"):
+            tip0 = robot.tip_at(plant.q) if robot.layout.tip_site >= 0 else None  # on the nominal geometry
+            params["trajectory"] = None if tip0 is None else tip_path(sc.trajectory, tip0, sc.base_dir)
+        names = plant.layout.joint_names
+        if names and (named_argument(name, "arm_trajectory") or sc.arm.waypoints):
+            params["arm_trajectory"] = sc.arm.joint_trajectory(names, plant.joint_angles)
+        ref = sc.controller.base_reference
+        if ref != "measured":
+            a, n = plant.layout.base_qadr, plant.layout.base_nq
+            if ref == "truth":
+                params["base_reference"] = [float(v) for v in plant.q[a:a + n]]
+            else:  # the model file's initial state (its initial keyframe, else qpos0)
+                d = mujoco.MjData(robot.model)
+                InitialState().apply(robot.model, d, robot.layout)
+                params["base_reference"] = [float(v) for v in d.qpos[a:a + n]]
+        params.update(vehicle_params(sc.vehicle, plant, sc.base_dir))
+        ctrl = create(name, robot=robot, **params)
+    except (ParameterError, ControllerError, ValueError, TypeError) as exc:
+        raise ScenarioError(f"scenario {sc.name!r}: {exc}") from None
     return plant, ctrl
-
-
-@lru_cache(maxsize=1)
-def _nominal_initial_pose() -> tuple[float, float, float]:
-    """The base pose (x, y, phi0) of the robot model file's initial keyframe (paper_initial)."""
-    m = _robot_file_model()
-    d = mujoco.MjData(m)
-    k = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_KEY, "paper_initial")
-    if k >= 0:
-        mujoco.mj_resetDataKeyframe(m, d, k)
-    return tuple(float(v) for v in d.qpos[:3])
 
 
 #: With sensors.delay = 1, the built-in RAC controllers stay stable only for Gamma and Lambda
@@ -546,14 +508,14 @@ def run_scenario(
     """Build and run a scenario (:func:`uvms_mj.sim.loop.run_closed_loop`). ``result.meta`` gains
     ``scenario`` (:func:`resolved`), ``name`` and ``backend``. ``built``: the (plant,
     controller) of :func:`build` if the caller built them already (fresh, never run)."""
-    if is_robot_scenario(scenario):
-        from uvms_mj.scenario import robot as robot_scenario
-
-        return robot_scenario.run_robot_scenario(scenario, sink=sink, on_sample=on_sample, built=built)
     plant, ctrl = built if built is not None else build(scenario)
     sensor = sensor_model(scenario)
     T = float(getattr(ctrl, "T", controller_period(scenario)))
     res = run_closed_loop(plant, ctrl, scenario.duration, T=T, sensor=sensor, seed=scenario.seed,
                           warm_start=scenario.warm_start, on_sample=on_sample, sink=sink)
     res.meta.update(name=scenario.name, backend=plant.backend, scenario=resolved(scenario))
+    if plant.layout.base_free:  # a floating robot's logs describe it from its model
+        from uvms_mj.scenario.robot import robot_info
+
+        res.meta["robot"] = robot_info(scenario, plant)
     return res

@@ -94,7 +94,8 @@ def _check_path(path: str, controllers: Sequence[str], item: str) -> None:
     checked by name). Raises SweepError naming it."""
     from uvms_mj.control import available
     from uvms_mj.plant.params import HYDRO_BODIES, OVERRIDE_KEYS
-    from uvms_mj.scenario.schema import OVERRIDE_NAMES, Scenario, _controller_signature
+    from uvms_mj.scenario.paper import OVERRIDE_NAMES
+    from uvms_mj.scenario.schema import Scenario, _controller_signature
 
     pre = f"--vary {item!r}: "
     parts = path.split(".")
