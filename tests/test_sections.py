@@ -198,9 +198,15 @@ def test_validate_resolved_prints_a_valid_scenario(tmp_path):
 
 def test_a_section_of_the_other_robot_kind_says_so(tmp_path):
     """One schema for every robot: a value that applies to one robot kind only says so in one
-    line; a controller refuses what it does not do (rac follows the tip, not arm waypoints)."""
-    with pytest.raises(ScenarioError, match=r"arm: rac moves the arm by the tip task"):
-        _load(tmp_path, "arm: {waypoints: [{t: 1.0, joints: {joint1: 10}}]}\n")
+    line; arm waypoints with a controller that follows the tip instead are a warning (rac) or
+    that controller's own error (pd)."""
+    from uvms_mj.scenario.schema import scenario_warnings
+
+    sc = _load(tmp_path, "arm: {waypoints: [{t: 1.0, joints: {joint1: 10}}]}\n")
+    assert any(w.startswith("arm.waypoints: controller 'rac_dob' moves the arm by the tip task")
+               for w in scenario_warnings(sc))
+    with pytest.raises(ScenarioError, match=r"arm: pd follows a tip trajectory, not arm joint waypoints"):
+        _load(tmp_path, "arm: {waypoints: [{t: 1.0, joints: {joint1: 10}}]}\ncontroller: {name: pd}\n")
     sc = _load(tmp_path, "arm: {waypoints: [{t: 1.0, joints: {joint1: 10}}]}\ncontroller: {name: station_pid}\n"
                          "control_period: 0.025\n"
                          "trajectory: null\n")

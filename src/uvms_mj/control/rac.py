@@ -129,8 +129,9 @@ class RAC(CompiledSamples, Controller):
         tip_orientation: also control the tip's orientation (floating robots; needs 6 arm dofs
             for full rank, else the DLS/pseudo-inverse handles the deficiency).
         null_kp, null_kd: null-space posture gains [1/s^2, 1/s] for a redundant arm.
-        arm_trajectory: the scenario's arm motion; only one without waypoints (the initial
-            angles) is accepted: the arm follows the tip task.
+        arm_trajectory: the scenario's arm motion, not used: the arm follows the tip task (a
+            redundant arm's null space rests at the initial angles); a scenario warns when it
+            has arm waypoints (``uses_arm_waypoints``).
         observer_arm, tf_arm: (rac_dob; our extension, off by default) the same observer
             (Eq. 14 corrected, Fig. 3(b)) on the arm's rows, with filter time constant tf_arm
             (default tf): f_M_hat = F(s)(u_M - f_tM + g M_MM phi_dot) - g M_MM phi_dot,
@@ -139,6 +140,8 @@ class RAC(CompiledSamples, Controller):
 
     observer = False
     robots = "floating"
+    #: Joint waypoints (a scenario's ``arm``) do not move the arm: it follows the tip task.
+    uses_arm_waypoints = False
     #: Run the samples through the compiled kernel when it is available (:mod:`.kernel`; the
     #: numbers are the Python code's to round-off). False: always the Python code below.
     use_kernel = True
@@ -231,9 +234,6 @@ class RAC(CompiledSamples, Controller):
         self.null_kd = float(null_kd)
         if not (math.isfinite(self.null_kp) and self.null_kp >= 0 and math.isfinite(self.null_kd) and self.null_kd >= 0):
             raise ControllerError(f"null_kp = {null_kp!r}, null_kd = {null_kd!r} must be finite and >= 0")
-        if arm_trajectory is not None and len(getattr(arm_trajectory, "times", ())):
-            raise ControllerError("rac moves the arm by the tip task (a redundant arm's null space rests at the "
-                                  "initial angles), not by arm joint waypoints (arm_trajectory)")
         self.filter = LowPassZOH(self.T, self.tf, size=nb)
         self.g = 1.0 / self.tf if observer_gain == "1/Tf" else (1.0 - self.filter.h) / self.T
         # Our extension (off by default, not in the paper): the same observer on the arm's rows.

@@ -285,6 +285,10 @@ def apply_sets(raw: dict, sets: Sequence[str]) -> dict:
             node = child
             path.append(parts[i])
             i += 1
+        if tuple(path) == ("trajectory",) and last == "curve" and isinstance(value, dict):
+            # a curve replaces the line (its keys do not apply to a curve)
+            for k in [k for k in node if k != "origin"]:
+                node.pop(k)
         other = _ALTERNATIVES.get((*path, last))
         if other is not None and value is not None:
             node.pop(other, None)
@@ -485,6 +489,9 @@ def scenario_warnings(scenario: Scenario) -> list[str]:
     """Warnings about valid but known-unstable combinations (one line each, naming the field)."""
     out = []
     c, s = scenario.controller, scenario.sensors
+    if scenario.arm.waypoints and not getattr(_factory(c.name), "uses_arm_waypoints", True):
+        out.append(f"arm.waypoints: controller {c.name!r} moves the arm by the tip task, not by joint waypoints "
+                   "(they apply to joint-space controllers such as station_pid and task_priority)")
     if s.delay and c.name in ("rac", "rac_dob"):
         named, _ = _controller_signature(c.name)
         robot_defaults = getattr(_factory(c.name), "PAPER_DEFAULTS", {})

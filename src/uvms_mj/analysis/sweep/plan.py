@@ -143,6 +143,9 @@ def _check_path(path: str, controllers: Sequence[str], item: str) -> None:
                                      "allowed: " + ", ".join(named))
             return
         ann = fields[part].annotation
+        sections = [a for a in getattr(ann, "__args__", ()) if isinstance(a, type) and issubclass(a, BaseModel)]
+        if sections:  # an optional section (X | None)
+            ann = sections[0]
         if isinstance(ann, type) and issubclass(ann, BaseModel):
             model = ann
             if not rest:
