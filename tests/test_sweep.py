@@ -172,6 +172,31 @@ def test_scale_is_relative_to_the_scenario_value():
     assert [a.column for a in plan.axes] == ["plant.current[1]"]
 
 
+
+def test_model_file_robot_overrides_are_swept_by_element_name():
+    # A model-file robot's overrides are "<element>.<field>" (not the paper's parameter names);
+    # scale of one the file does not give is a factor of the model's own value ("xF"), which the
+    # run's nominal model applies: its hydro plugin's added mass = F x the model file's numbers
+    # (models/bluerov2_heavy/bluerov2_heavy_hull.xml: 6.36 7.12 18.68 0.189 0.135 0.222).
+    from uvms_mj.physics.model import body_config, load_spec
+    from uvms_mj.plant.files import nominal_model_path
+    from uvms_mj.plant.robot import apply_overrides
+
+    key = "nominal.overrides.bluerov2_hull.added_mass"
+    plan = plan_sweep(str(SCENARIOS / "bluerov2_alpha_sweep.yaml"), [f"{key}=scale([0.7, 1.3])"],
+                      controllers="rac", sets=["duration=1"])
+    assert [r.values[key] for r in plan.runs] == ["x0.7", "x1.3"]
+    spec = load_spec(nominal_model_path("bluerov2_alpha"))
+    apply_overrides(spec, {"bluerov2_hull.added_mass": plan.runs[1].values[key]})
+    got = [float(v) for v in body_config(spec, "bluerov2_hull")["added_mass"].split()]
+    assert np.allclose(got, 1.3 * np.array([6.36, 7.12, 18.68, 0.189, 0.135, 0.222]), rtol=1e-12)
+    with pytest.raises(SweepError, match="<element>.<field>"):
+        parse_vary("nominal.overrides.added_mass=[1]", ["rac"], robot="bluerov2_alpha")
+    with pytest.raises(SweepError, match="no_such_body"):  # an unknown element: named before any run
+        plan_sweep(str(SCENARIOS / "bluerov2_alpha_sweep.yaml"), ["nominal.overrides.no_such_body.mass=[1]"],
+                   controllers="rac", sets=["duration=1"])
+
+
 # ------------------------------------------------------------------ running
 
 

@@ -13,8 +13,11 @@ Keys
 ``KEY.PATH`` is any scenario field (:mod:`uvms_mj.scenario.schema`), checked against the schema before
 anything runs: ``plant.current``, ``thrusters.tau``, ``sensors.position_noise``,
 ``controller.params.gamma``, ``trajectory.cruise_speed``, ... Inside ``plant.overrides`` and
-``nominal.overrides`` the rest of the path is one parameter name (``OVERRIDE_KEYS``, e.g.
-``nominal.overrides.base.added_mass``); inside ``controller.params`` a parameter of every swept
+``nominal.overrides`` the rest of the path is one parameter name: on the paper's robot one of
+``OVERRIDE_KEYS`` (e.g. ``nominal.overrides.base.added_mass``), on a model-file robot
+``<element or role>.<field>`` as in its scenario's overrides (e.g.
+``nominal.overrides.bluerov2_hull.added_mass``; ``scale`` of a field the file does not set is
+the factor ``"xF"`` of the model's own value); inside ``controller.params`` a parameter of every swept
 controller. Not allowed: ``name``, ``description``, ``seed`` (per-run seeds come from
 ``--seed``), ``controller.name`` (use ``--controllers``) and ``outputs.*`` (the sweep writes
 its own).

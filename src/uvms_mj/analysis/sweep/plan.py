@@ -89,9 +89,11 @@ def _expand(key: str) -> list[str]:
     return out
 
 
-def _check_path(path: str, controllers: Sequence[str], item: str) -> None:
+def _check_path(path: str, controllers: Sequence[str], item: str, robot: str = "paper") -> None:
     """The dotted path names a scenario field (schema walk; overrides and controller params
-    checked by name). Raises SweepError naming it."""
+    checked by name: the paper robot's parameter names, or on a model-file robot
+    ``<element or role>.<field>``, checked on its model when each run is validated). Raises
+    SweepError naming it."""
     from uvms_mj.control import available
     from uvms_mj.plant.params import HYDRO_BODIES, OVERRIDE_KEYS
     from uvms_mj.scenario.paper import OVERRIDE_NAMES
@@ -118,6 +120,11 @@ def _check_path(path: str, controllers: Sequence[str], item: str) -> None:
         rest = parts[i + 1:]
         if tuple(loc) in (("plant", "overrides"), ("nominal", "overrides")):
             name = ".".join(rest)
+            if robot != "paper":  # "<element>.<field>": checked on the model by each run's validation
+                if len(rest) < 2:
+                    raise SweepError(pre + f"{path}: expected {'.'.join(loc)}.<element>.<field> (an element name of "
+                                     f"the {robot} model or the vehicle role, e.g. {'.'.join(loc)}.vehicle.added_mass)")
+                return
             allowed = ", ".join(k.replace("BODY", "{" + ",".join(HYDRO_BODIES) + "}") for k in OVERRIDE_KEYS)
             if not name or name not in OVERRIDE_NAMES:
                 close = difflib.get_close_matches(name, list(OVERRIDE_NAMES), n=1, cutoff=0.6)
@@ -156,9 +163,9 @@ def _check_path(path: str, controllers: Sequence[str], item: str) -> None:
         return
 
 
-def parse_vary(item: str, controllers: Sequence[str] = ("rac", "rac_dob")) -> Vary:
-    """Parse and check ``KEY.PATH=SPEC`` (the key against the scenario schema, the spec's
-    syntax and ranges). Values against the field's type are checked by :func:`plan_sweep`."""
+def parse_vary(item: str, controllers: Sequence[str] = ("rac", "rac_dob"), robot: str = "paper") -> Vary:
+    """Parse and check ``KEY.PATH=SPEC`` (the key against the scenario schema for ``robot``, the
+    spec's syntax and ranges). Values against the field's type are checked by :func:`plan_sweep`."""
     text = str(item)
     key, sep, spec_text = text.partition("=")
     key = key.strip()
@@ -182,7 +189,7 @@ def parse_vary(item: str, controllers: Sequence[str] = ("rac", "rac_dob")) -> Va
     if len(set(paths)) != len(paths):
         raise SweepError(f"--vary {text!r}: {{...}} names a field twice")
     for p in paths:
-        _check_path(p, controllers, text)
+        _check_path(p, controllers, text, robot)
     try:
         spec = parse_spec(spec_text)
     except SweepError as exc:
@@ -340,6 +347,8 @@ class _Bases:
             given = res[parts[0]]["overrides"]
             if name in given:
                 return copy.deepcopy(given[name])
+            if sc.robot != "paper":  # a model-file robot: the model's own value, as the factor x1
+                return "x1"
             if parts[0] not in memo:
                 if parts[0] == "nominal":
                     memo["nominal"] = nominal_params(sc)
@@ -354,7 +363,20 @@ class _Bases:
         return copy.deepcopy(node)
 
 
+def _factor_text(v: Any) -> float | None:
+    """The factor of an override value written "xF" (a model-file robot's factor form), else None."""
+    if isinstance(v, str) and v[:1] in ("x", "X"):
+        try:
+            return float(v[1:])
+        except ValueError:
+            return None
+    return None
+
+
 def _times(factor: Any, base: Any) -> Any:
+    f0 = _factor_text(base)
+    if f0 is not None:  # a factor of the model's value: the product, as a factor
+        return f"x{float(factor) * f0!r}"
     if isinstance(base, list):
         return [float(factor) * float(b) for b in base]
     return float(factor) * float(base)
@@ -392,7 +414,8 @@ def _check_assignments(varies: Sequence[Vary], bases: _Bases, controllers: Seque
                                                  f"{len(base)} components ({_fmt(base)})")
                     if a.scale:
                         b = base if a.index is None or not isinstance(base, list) else base[a.index]
-                        ok = _is_num(b) or (isinstance(b, list) and b and all(_is_num(x) for x in b))
+                        ok = (_is_num(b) or (isinstance(b, list) and b and all(_is_num(x) for x in b))
+                              or _factor_text(b) is not None)
                         if not ok:
                             raise SweepError(f"--vary {v.text!r}: scale needs a numeric value to scale, but {p} is "
                                              f"{_fmt(b)} in the scenario (with controller {c})")
@@ -483,7 +506,7 @@ def plan_sweep(
         raise SweepError("give at least one --vary KEY.PATH=SPEC")
     if seed is None or int(seed) < 0:
         raise SweepError(f"--seed must be >= 0 (got {seed})")
-    varies = [parse_vary(v, names) for v in vary]
+    varies = [parse_vary(v, names, base.robot) for v in vary]
     cols = [a.column for v in varies for a in v.axes]
     dup = sorted({c for c in cols if cols.count(c) > 1})
     if dup:
