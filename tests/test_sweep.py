@@ -381,3 +381,20 @@ def test_sigterm_keeps_finished_runs_for_resume(tmp_path):
     plan = plan_sweep(PAPER, vary, n=20)
     finished = sw.prepare_out(plan, out)
     assert set(finished) == {r["key"] for r in done}
+
+
+def test_summary_counts_failures_where_another_held_and_per_value():
+    # Hand-made rows, counted by hand: sample 1 has rac_dob diverged while station_pid held,
+    # sample 2 both diverged (not counted as "where another held").
+    from uvms_mj.analysis.sweep.summary import format_summary, summarize
+
+    statuses = [(0, "ok", "ok"), (1, "ok", "diverged"), (1, "diverged", "diverged")]
+    rows = [{"sample": i, "controller": c, "status": st, "delay": d, "run_id": f"s{i}-{c}", "reason": "",
+             "base_pos_rms_mm": 1.0, "base_att_rms_mrad": 1.0, "tip_rms_mm": 1.0}
+            for i, (d, *sts) in enumerate(statuses) for c, st in zip(("station_pid", "rac_dob"), sts)]
+    s = summarize(rows, ["station_pid", "rac_dob"], ["delay"])
+    assert s["failed_where_held"] == {"station_pid": {"rac_dob": 0}, "rac_dob": {"station_pid": 1}}
+    assert s["by_column"]["delay"] == {"0": {"station_pid": [0, 1], "rac_dob": [0, 1]},
+                                       "1": {"station_pid": [1, 2], "rac_dob": [2, 2]}}
+    text = format_summary(s)
+    assert "rac_dob where station_pid held 1" in text and "1: station_pid 1/2, rac_dob 2/2" in text

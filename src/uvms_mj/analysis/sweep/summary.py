@@ -1,5 +1,6 @@
 """The summary of a sweep's results: per controller the counts and metric distributions, per
-controller pair the paired ratios; as a dict (``summary.json``) and as text."""
+controller pair the paired ratios and the samples where one failed while the other held, per
+varied column the failures at each of its values; as a dict (``summary.json``) and as text."""
 
 from __future__ import annotations
 
@@ -33,9 +34,43 @@ def _pairs(rows: Sequence[dict], ref: str, other: str) -> list[tuple[dict, dict]
     return out
 
 
+#: Varied columns with at most this many distinct values get a failures-per-value breakdown.
+MAX_LEVELS = 12
+
+
+def _key(v: Any) -> str:
+    return "-" if v is None else (f"{v:g}" if isinstance(v, float) else str(v))
+
+
+def _failed_where_held(rows: Sequence[dict], controllers: Sequence[str]) -> dict[str, dict[str, int]]:
+    """{c: {other: samples where c did not end ok while other did}} (same sample, paired)."""
+    by = {(r["sample"], r["controller"]): r["status"] for r in rows}
+    samples = sorted({r["sample"] for r in rows})
+    return {c: {o: sum(1 for s in samples if by.get((s, c)) not in (None, "ok") and by.get((s, o)) == "ok")
+                for o in controllers if o != c} for c in controllers}
+
+
+def _by_column(rows: Sequence[dict], controllers: Sequence[str], columns: Sequence[str]) -> dict:
+    """{column: {value: {controller: [failed, runs]}}} for the grid-like columns (few values)."""
+    out: dict[str, dict] = {}
+    for col in columns:
+        values = sorted({_key(r.get(col)) for r in rows}, key=lambda v: (len(v), v))
+        if len(values) > MAX_LEVELS:
+            continue
+        table: dict[str, dict] = {}
+        for v in values:
+            rs = [r for r in rows if _key(r.get(col)) == v]
+            table[v] = {c: [sum(1 for r in rs if r["controller"] == c and r["status"] != "ok"),
+                            sum(1 for r in rs if r["controller"] == c)] for c in controllers}
+        out[col] = table
+    return out
+
+
 def summarize(rows: Sequence[dict], controllers: Sequence[str], columns: Sequence[str] = ()) -> dict:
-    """Counts, per-controller metric distributions (ok runs) and paired ratios (each
-    controller / the first, samples where both are ok)."""
+    """Counts, per-controller metric distributions (ok runs), paired ratios (each controller /
+    the first, samples where both are ok), ``failed_where_held`` (per controller and other: the
+    samples it failed while the other ended ok) and ``by_column`` (failures and runs per value
+    of each varied column with at most ``MAX_LEVELS`` values)."""
     out: dict[str, Any] = {"runs": len(rows), "controllers": {}, "ratios": {}, "failures": []}
     for c in controllers:
         rs = [r for r in rows if r["controller"] == c]
@@ -54,6 +89,8 @@ def summarize(rows: Sequence[dict], controllers: Sequence[str], columns: Sequenc
             st["below_1"] = float(np.mean(np.asarray(vals) < 1.0)) if vals else None
             rat[m] = st
         out["ratios"][f"{c}/{controllers[0]}"] = {"pairs": len(pairs), "metrics": rat}
+    out["failed_where_held"] = _failed_where_held(rows, controllers)
+    out["by_column"] = _by_column(rows, controllers, columns)
     out["failures"] = [{"run_id": r["run_id"], "status": r["status"], "reason": r["reason"],
                         **{k: r.get(k) for k in columns}} for r in rows if r["status"] != "ok"]
     return out
@@ -83,6 +120,15 @@ def format_summary(summary: dict) -> str:
             b = st.get("below_1")
             share = "-" if b is None else f"{100 * b:.0f} %"
             lines.append(f"  {SUMMARY_METRICS[m].split(' [')[0]:<26}{cell(st):>{w}}   {share}")
+    held = summary.get("failed_where_held") or {}
+    if any(n for d in held.values() for n in d.values()):
+        lines.append("failed where another held (samples): " + "; ".join(
+            f"{c} where {o} held {n}" for c, d in held.items() for o, n in d.items() if n))
+    for col, table in (summary.get("by_column") or {}).items():
+        if len(table) < 2:
+            continue
+        lines.append(f"failed / runs by {col}: " + "; ".join(
+            f"{v}: " + ", ".join(f"{c} {f}/{n}" for c, (f, n) in t.items()) for v, t in table.items()))
     fails = summary.get("failures") or []
     if fails:
         lines.append(f"failed runs: {len(fails)}")
