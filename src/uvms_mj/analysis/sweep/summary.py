@@ -42,6 +42,14 @@ def _key(v: Any) -> str:
     return "-" if v is None else (f"{v:g}" if isinstance(v, float) else str(v))
 
 
+def _order(v: str) -> tuple:
+    """Numbers in numeric order, before other values (in text order)."""
+    try:
+        return (0, float(v), "")
+    except ValueError:
+        return (1, 0.0, v)
+
+
 def _failed_where_held(rows: Sequence[dict], controllers: Sequence[str]) -> dict[str, dict[str, int]]:
     """{c: {other: samples where c did not end ok while other did}} (same sample, paired)."""
     by = {(r["sample"], r["controller"]): r["status"] for r in rows}
@@ -54,7 +62,7 @@ def _by_column(rows: Sequence[dict], controllers: Sequence[str], columns: Sequen
     """{column: {value: {controller: [failed, runs]}}} for the grid-like columns (few values)."""
     out: dict[str, dict] = {}
     for col in columns:
-        values = sorted({_key(r.get(col)) for r in rows}, key=lambda v: (len(v), v))
+        values = sorted({_key(r.get(col)) for r in rows}, key=_order)
         if len(values) > MAX_LEVELS:
             continue
         table: dict[str, dict] = {}
