@@ -96,20 +96,20 @@ gain T < 1 (the sampled CLIK error e(k+1) = (1 - gain T) e(k) then decays monoto
 dls_threshold 0.01 and dls_damping 0.05 (Jacobian units): the damping starts where the arm's
 tip Jacobian loses two orders of magnitude against its usual 0.1 - 0.3 m/rad; rank_tol 1e-10.
 
-Reach (ours, ``carry = "path"``, the default): the paper's Eq. 12 transposed to this controller.
-With the vehicle position held below the tip task, a tip path that leaves the arm's reach makes
-task 3 (or 4) ill-conditioned as the arm stretches: holding the vehicle still needs a joint motion
-~ 1 / (the arm's smallest singular value), the damped least squares only bound it from 0.01 m/rad
-(an absolute number, not scaled to the arm), and the run diverged (``sum |q_dot| > 100`` at
-4.8 s in scenarios/bluerov2_alpha_beyond_reach.yaml; 5.7 s with dls_threshold 0.1). So, as
+Reach. With the vehicle position held below the tip task (``carry = "hold"``, the default: the
+textbook controller), a tip path that leaves the arm's reach pulls the vehicle off its station by
+priority; what made that run diverge (``sum |q_dot| > 100`` at 4.8 s in
+scenarios/bluerov2_alpha_beyond_reach.yaml, 5.7 s with dls_threshold 0.1: the damping does not
+help) was the joint loop (``joint_gains``, "Low-level loop" above), not the priorities. Ours,
+``carry = "path"``: the paper's Eq. 12 transposed to this controller, as
 ``rac`` does, while the arm's manipulability w = sqrt(det(B B^T)) (B: the tip Jacobian on the arm
 joints, nominal model at the measured q) is below ``js`` (by default "auto": 0.72 w_max, the
 paper's fraction, :mod:`uvms_mj.control.manipulability`) the vehicle's desired position moves
 with the tip path, p_v,d += T (p_d(t + T) - p_d(t)) / T per sample, its velocity fed forward in
 v_3 (:class:`uvms_mj.control.digital.SingularHandler`, carry "path", ramps of ``n_ramp``
 samples; release above ``js_high``): the vehicle carries the arm, which keeps the posture it had
-at js, away from the singularity. ``carry = "hold"``: the vehicle holds its station whatever
-the tip does (the textbook controller).
+at js, away from the singularity (measured in the reach study: vehicle error against its
+desired position 3.6 mm max with "path", against the fixed station 145 mm with "hold").
 
 References are to chapter and topic; the book's equation numbers were not checked against a
 copy (the forms are the standard ones of the cited papers: Nakamura, Hanafusa & Yoshikawa 1987;
@@ -308,8 +308,9 @@ class TaskPriority(Controller):
         joint_gains: "inertia" (default, ours: the joint rows' PD through the nominal joint-block
             inertia at the measured q) | "diagonal" (module docstring, "Low-level loop"); explicit
             kp / kd always act per dof.
-        carry: "path" (default, ours: the vehicle carries the arm along the tip path while the
-            arm's manipulability is below js; module docstring "Reach") | "hold" (the station, whatever the tip does).
+        carry: "hold" (default: the station, the tip task above it) | "path" (ours: the vehicle
+            carries the arm along the tip path while the arm's manipulability is below js;
+            module docstring "Reach").
         js, js_high, js_ratio, n_ramp: the carry's thresholds and ramp, as ``rac``'s Eq. 12 ones
             ("auto" = js_ratio x the arm's largest manipulability; js_high default js; 30 samples).
     """
@@ -324,7 +325,7 @@ class TaskPriority(Controller):
                  bandwidth_base: float = 2.0, bandwidth_attitude: float = 3.0, bandwidth_joints: float = 10.0,
                  damping_ratio: float = 1.0, kp=None, kd=None, reference_lead_limit: float = 1.0,
                  feedforward: bool = True, base_reference=None, base_trajectory=None,
-                 station_attitude: str | None = None, carry: str = "path", js: float | str = "auto",
+                 station_attitude: str | None = None, carry: str = "hold", js: float | str = "auto",
                  js_high: float | str | None = None, js_ratio: float = PAPER_JS_RATIO, n_ramp: int = 30,
                  joint_gains: str = "inertia") -> None:
         if not isinstance(robot, NominalRobot):
