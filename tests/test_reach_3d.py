@@ -112,6 +112,23 @@ def test_the_vehicle_carries_the_arm_and_the_tip_arrives(name):
 
 
 @pytest.mark.slow
+def test_station_pid_stretches_the_arm_and_holds():
+    """station_pid (its arm IK relative to a fixed station): no divergence, no joint past its
+    range, the vehicle within 1 mm of its station, and the tip short of the target by the
+    distance the target lies beyond the reach (the arm stretched towards it; 2 mm: the IK's
+    damping and the vehicle's attitude error on the 0.3 m arm)."""
+    plant, ctrl, res = _run("station_pid")
+    assert res.status == "ok", res.reason
+    q = res.signals["q_true"]
+    assert _excursion(plant, q) < JOINT_SLACK
+    assert np.linalg.norm(q[-1, :3] - q[0, :3]) < 1e-3
+    target = np.asarray(ctrl.trajectory.position(1e3), dtype=float)
+    s, _ = _geometry(ctrl.robot, q[0])
+    beyond = np.linalg.norm(target - s) - _reach(ctrl.robot)
+    assert np.linalg.norm(res.signals["tip_true"][-1] - target) == pytest.approx(beyond, abs=2e-3)
+
+
+@pytest.mark.slow
 def test_the_singular_phase_engages_only_near_the_stretch():
     """rac: phase 0 while the tip is below 90 % of the reach from the (moving) shoulder axis,
     phase 1 reached (the carry happens), and every phase-1 sample with the arm at >= 90 % of
