@@ -150,7 +150,7 @@ def test_alpha_phase_off_mid_workspace_on_when_stretched(alpha):
     assert _w(robot, ctrl.arm_dofs, [0.0, s0, straight - math.radians(20.0), 0.0]) < ctrl.js
     posture = f"initial.joints={{alpha_shoulder: {math.degrees(s0):.4f}, alpha_elbow: {math.degrees(e0):.4f}}}"
     phases = {}
-    absolute = ["controller.params.js=0.045", "controller.params.dls_threshold=0.01"]
+    absolute = ["controllers.rac.js=0.045", "controllers.rac.dls_threshold=0.01"]  # the study pins controllers.rac
     for key, sets in (("auto", []), ("absolute", absolute)):
         sets = ["duration=10", "controller.name=rac", posture] + sets
         sc = load_scenario(SCEN / "bluerov2_alpha_circle_current.yaml", sets)

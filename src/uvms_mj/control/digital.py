@@ -22,6 +22,8 @@ PAPER_T = 1.0 / 60.0
 PAPER_GAINS = (0.3, 0.3, 0.2, 0.2, 0.2)  # Gamma; Lambda printed with 4 entries, read as the same 5
 PAPER_TF = 10.0
 PAPER_JS = 0.045
+#: Eq. 12's carry velocity (:class:`SingularHandler`): the paper's reading, and ours for 3-D arms.
+CARRY_MODES = ("cruise", "path")
 
 
 # ------------------------------------------------------------------ building blocks
@@ -65,6 +67,16 @@ class SingularHandler:
     For any robot (``rac``), ``detb`` is the arm's manipulability, ``v_cruise`` may be a callable
     k -> velocity (evaluated at k1: the trajectory's velocity then) and ``size`` the number of
     base position axes (default: the size of ``v_cruise``).
+
+    ``carry`` (:data:`CARRY_MODES`): "cruise" (default, the paper's reading: the velocity taken
+    at k1 is held until k2) or "path" (ours, for 3-D arms): the callable ``v_cruise`` is
+    evaluated at EVERY sample of phase 1, the target of the ramp being the path's velocity over
+    [k, k+1), so the base moves with the tip's path and stops when it stops. Why: in 3-D a
+    posture can be below js without being stretched (the Alpha arm's tip near its base-yaw axis:
+    w = 0.125 w_max at the shipped posture), and k2 then never comes; with "cruise" the base
+    kept carrying the arm at the cruise speed long after the tip stopped (measured: the base
+    0.78 m past a 0.3 m line, the tip 220 mm from its target, the shoulder at its limit;
+    scenarios/bluerov2_alpha_beyond_reach.yaml's header).
     """
 
     js_low: float
@@ -72,8 +84,13 @@ class SingularHandler:
     n: int
     v_cruise: Any
     size: int | None = None
+    carry: str = "cruise"
 
     def __post_init__(self) -> None:
+        if self.carry not in CARRY_MODES:
+            raise ControllerError(f"carry = {self.carry!r}; allowed: {', '.join(CARRY_MODES)}")
+        if self.carry == "path" and not callable(self.v_cruise):
+            raise ControllerError("carry = 'path' needs v_cruise as a callable k -> the path's velocity")
         size = self.size if self.size is not None else int(np.size(self.v_cruise))
         self.phase = 0
         self.k_event = 0
@@ -95,6 +112,8 @@ class SingularHandler:
             self.phase, self.k_event, self.v_from, self.v_to = 1, k, self.v.copy(), np.array(v, dtype=float)
         elif self.phase == 1 and a > self.js_high:  # k2
             self.phase, self.k_event, self.v_from, self.v_to = 2, k, self.v.copy(), np.zeros_like(self.v)
+        elif self.phase == 1 and self.carry == "path":  # the ramp's target follows the path
+            self.v_to = np.array(self.v_cruise(k), dtype=float)
         elif self._settled:  # no event and the ramp is over: v as computed at its end
             return self.v
         frac = min(1.0, (k - self.k_event + 1) / self.n)

@@ -57,6 +57,7 @@ from uvms_mj.control.digital import (
     PAPER_T,
     PAPER_TF,
     LowPassZOH,
+    CARRY_MODES,
     SingularHandler,
     check_rac_settings,
 )
@@ -114,6 +115,12 @@ class RAC(CompiledSamples, Controller):
             the paper's 0.045 on its arm (:mod:`uvms_mj.control.manipulability`) -- or a number
             [m^r]; js_high default js. Resolved numbers: ``resolved_params``.
         n_ramp: samples of the Eq. 12 velocity ramps (ours: 30).
+        carry: Eq. 12's carry velocity (:class:`uvms_mj.control.digital.SingularHandler`):
+            "cruise" (the paper's reading: the tip's cruise velocity, taken at k1, held until k2),
+            "path" (ours: the tip path's velocity at every sample of the carry, so the base moves
+            with the path and stops when it stops) or "auto" (default: "cruise" on a planar base,
+            the paper's robot, "path" on a floating one: in 3-D a posture can sit below js without
+            being stretched and k2 then never comes; docs/controllers.md).
         base_trajectory: the vehicle origin's desired path (``position(t)``, world [m]; a scenario's
             ``vehicle.trajectory``): the base's desired position moves along it (plus the Eq. 12
             offset), its orientation stays the reference's; planar: the path's coordinates along the
@@ -178,6 +185,7 @@ class RAC(CompiledSamples, Controller):
         js_ratio: float = PAPER_JS_RATIO,
         js_high_ratio: float | None = None,
         dls_ratio: float = DLS_RATIO,
+        carry: str = "auto",
     ) -> None:
         if robot is None:
             robot = paper_nominal_robot()
@@ -226,6 +234,11 @@ class RAC(CompiledSamples, Controller):
                                                   js_high_ratio, dls_ratio)
         js, js_high, dls_threshold = (self.resolved_params[k] for k in ("js", "js_high", "dls_threshold"))
         check_rac_settings(self, js, js_high, n_ramp, dls_threshold, dls_damping, tf, observer_gain, observer_input)
+        if carry not in ("auto",) + CARRY_MODES:
+            raise ControllerError(f"carry = {carry!r}; allowed: auto, {', '.join(CARRY_MODES)}")
+        #: Eq. 12's carry velocity as used ("auto" resolved; recorded in resolved_params).
+        self.carry = ("path" if self.free else "cruise") if carry == "auto" else carry
+        self.resolved_params["carry"] = self.carry
         size = 7 if self.free else nb
         self.base_trajectory = check_base_trajectory(base_trajectory)
         self.base_reference = check_base_reference(base_reference, size)
@@ -381,6 +394,12 @@ class RAC(CompiledSamples, Controller):
         n = self.lin.size
         return v[self.tip_rows] if v.size == 3 else v[:n]
 
+    def _v_path(self, k: int) -> np.ndarray:
+        """The tip path's velocity over [k, k+1): (p_d(k+1) - p_d(k)) / T (world [m/s]; planar:
+        the tip rows), Eq. 12's carry velocity with ``carry = "path"``: the base offset then
+        moves by exactly the path's step, so the arm keeps the posture it had."""
+        return (self._tip_k(k + 1) - self._tip_k(k)) / self.T
+
     # ---------------------------------------------------------------- interface
 
     def reset(self, m: Measurement) -> None:
@@ -406,8 +425,9 @@ class RAC(CompiledSamples, Controller):
         pos = {int(d): i for i, d in enumerate(a)}
         self._motor_idx = np.array([pos[int(d)] for d in r.motor_dofs], dtype=int)
         self._Jb_key = None
-        self.singular = SingularHandler(self.js, self.js_high, self.n_ramp, self._v_event,
-                                        size=3 if self.free else self.lin.size)
+        self.singular = SingularHandler(self.js, self.js_high, self.n_ramp,
+                                        self._v_path if self.carry == "path" else self._v_event,
+                                        size=3 if self.free else self.lin.size, carry=self.carry)
         self._base_offset = {m.k: np.zeros(3 if self.free else self.lin.size)}
         self._base_d = None  # (offset, base part of p_d) of the last _desired
         self._tip_blk = None  # (first sample, desired tips) of _tip_k

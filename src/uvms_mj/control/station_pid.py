@@ -82,7 +82,11 @@ class StationPID(Controller):
         feedforward: add the nominal hold force (gravity minus buoyancy).
         trajectory: an end-effector path (world): the arm's joint targets then come from
             resolved-rate inverse kinematics relative to the station (the vehicle at its reference
-            pose), gain ``ik_gain`` [1/s], damping ``ik_damping`` [m]; otherwise
+            pose), gain ``ik_gain`` [1/s], damping ``ik_damping`` [m] (default 0.05, ours: with
+            0.01 a target beyond the reach made the IK jump across the stretched arm, its step
+            there ik_gain T |e| / (2 ik_damping) = 0.5 rad a sample, and the run diverged at
+            10.8 s in scenarios/bluerov2_alpha_beyond_reach.yaml; 0.05 holds the arm stretched,
+            the tip 142 mm short of the target); otherwise
             ``arm_trajectory`` (joint waypoints) or the initial angles.
         base_reference: the station (x, y, z [m] world, qw, qx, qy, qz; the scenario's
             ``vehicle.setpoint``); default the first measurement's vehicle position, its attitude
@@ -98,7 +102,7 @@ class StationPID(Controller):
     robots = "floating"
 
     def __init__(self, robot: NominalRobot, arm_trajectory: JointTrajectory | None = None, trajectory=None,
-                 T: float = DEFAULT_T, ik_gain: float = 5.0, ik_damping: float = 0.01,
+                 T: float = DEFAULT_T, ik_gain: float = 5.0, ik_damping: float = 0.05,
                  bandwidth_base: float = 1.0, bandwidth_attitude: float = 2.0, bandwidth_joints: float = 6.0, damping_ratio: float = 1.0,
                  integral_time: float = 5.0, kp_position=None, kd_position=None, ki_position=None,
                  kp_attitude=None, kd_attitude=None, ki_attitude=None, kp_joints=None, kd_joints=None,

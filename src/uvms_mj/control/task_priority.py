@@ -78,7 +78,15 @@ body wrench [R^T F; M] to the saturating allocator :class:`uvms_mj.physics.thrus
 rows clipped to the motors' ranges. Gains, unless given, from the nominal mass matrix M at the
 initial state: Kp_i = M_ii w_i^2, Kd_i = 2 damping_ratio w_i M_ii (a critically damped
 second-order loop per dof, as ``station_pid``), w_i = ``bandwidth_base`` /
-``bandwidth_attitude`` / ``bandwidth_joints``.
+``bandwidth_attitude`` / ``bandwidth_joints``. The joint rows, by default (``joint_gains =
+"inertia"``, ours), use the whole nominal joint-block inertia at the measured q instead of its
+diagonal: u_j = M_jj(q) (w_j^2 lead_j + 2 damping_ratio w_j (zeta_r - zeta)_j) + h_j, so every
+joint-space mode has the bandwidth w_j. Why: with diagonal gains a mode's bandwidth is w_j
+sqrt(lambda), lambda an eigenvalue of M_jj^-1 diag(M_jj), and on the Alpha arm lambda_max grows
+from 3.6 (shoulder 40, elbow 90 deg) to 8.6 stretched (80, 160 deg): 29 rad/s at T = 0.02 s,
+where the sampled loop oscillated at 5 Hz and diverged in the reach study
+(scenarios/bluerov2_alpha_beyond_reach.yaml). ``joint_gains = "diagonal"``: the diagonal gains
+above on the joints too (as before).
 
 Defaults. A cascade: the kinematic (outer) gains, 1/s on the tip and the attitude and 0.5/s on
 task 3, sit below the low-level (inner) bandwidths, 2 rad/s on the vehicle's translation,
@@ -87,6 +95,21 @@ track a moving reference instead of holding a fixed one); every kinematic gain m
 gain T < 1 (the sampled CLIK error e(k+1) = (1 - gain T) e(k) then decays monotonically).
 dls_threshold 0.01 and dls_damping 0.05 (Jacobian units): the damping starts where the arm's
 tip Jacobian loses two orders of magnitude against its usual 0.1 - 0.3 m/rad; rank_tol 1e-10.
+
+Reach. With the vehicle position held below the tip task (``carry = "hold"``, the default: the
+textbook controller), a tip path that leaves the arm's reach pulls the vehicle off its station by
+priority; what made that run diverge (``sum |q_dot| > 100`` at 4.8 s in
+scenarios/bluerov2_alpha_beyond_reach.yaml, 5.7 s with dls_threshold 0.1: the damping does not
+help) was the joint loop (``joint_gains``, "Low-level loop" above), not the priorities. Ours,
+``carry = "path"``: the paper's Eq. 12 transposed to this controller, as
+``rac`` does, while the arm's manipulability w = sqrt(det(B B^T)) (B: the tip Jacobian on the arm
+joints, nominal model at the measured q) is below ``js`` (by default "auto": 0.72 w_max, the
+paper's fraction, :mod:`uvms_mj.control.manipulability`) the vehicle's desired position moves
+with the tip path, p_v,d += T (p_d(t + T) - p_d(t)) / T per sample, its velocity fed forward in
+v_3 (:class:`uvms_mj.control.digital.SingularHandler`, carry "path", ramps of ``n_ramp``
+samples; release above ``js_high``): the vehicle carries the arm, which keeps the posture it had
+at js, away from the singularity (measured in the reach study: vehicle error against its
+desired position 3.6 mm max with "path", against the fixed station 145 mm with "hold").
 
 References are to chapter and topic; the book's equation numbers were not checked against a
 copy (the forms are the standard ones of the cited papers: Nakamura, Hanafusa & Yoshikawa 1987;
@@ -104,6 +127,8 @@ from typing import Any, Sequence
 import mujoco
 import numpy as np
 
+from uvms_mj.control.digital import SingularHandler
+from uvms_mj.control.manipulability import PAPER_JS_RATIO, manipulability, resolve_thresholds
 from uvms_mj.control.nominal import JointTrajectory, NominalRobot
 from uvms_mj.physics.thrusters import Allocator
 from uvms_mj.control.base import Command, Controller, ControllerError, Measurement, check_positive, register
@@ -113,6 +138,10 @@ from uvms_mj.control.station_pid import DEFAULT_T
 
 #: The priority forms (module docstring).
 PRIORITY_FORMS = ("siciliano_slotine", "singularity_robust")
+#: The vehicle's carry of the arm (``carry``; module docstring "Reach").
+TP_CARRY_MODES = ("path", "hold")
+#: How the joint rows of the low-level loop are scaled (``joint_gains``; module docstring).
+JOINT_GAINS = ("inertia", "diagonal")
 #: Where the arm posture sits in the hierarchy (``posture_level``).
 POSTURE_LEVELS = ("with_position", "below_position")
 
@@ -276,6 +305,14 @@ class TaskPriority(Controller):
             feed-forward p_dot_v,d(t); the attitude stays the station's.
         station_attitude: the default station's attitude: "level" (default: roll = pitch = 0 at
             the measured yaw) | "measured" (:mod:`uvms_mj.control.station`).
+        joint_gains: "inertia" (default, ours: the joint rows' PD through the nominal joint-block
+            inertia at the measured q) | "diagonal" (module docstring, "Low-level loop"); explicit
+            kp / kd always act per dof.
+        carry: "hold" (default: the station, the tip task above it) | "path" (ours: the vehicle
+            carries the arm along the tip path while the arm's manipulability is below js;
+            module docstring "Reach").
+        js, js_high, js_ratio, n_ramp: the carry's thresholds and ramp, as ``rac``'s Eq. 12 ones
+            ("auto" = js_ratio x the arm's largest manipulability; js_high default js; 30 samples).
     """
 
     robots = "floating"
@@ -288,7 +325,9 @@ class TaskPriority(Controller):
                  bandwidth_base: float = 2.0, bandwidth_attitude: float = 3.0, bandwidth_joints: float = 10.0,
                  damping_ratio: float = 1.0, kp=None, kd=None, reference_lead_limit: float = 1.0,
                  feedforward: bool = True, base_reference=None, base_trajectory=None,
-                 station_attitude: str | None = None) -> None:
+                 station_attitude: str | None = None, carry: str = "hold", js: float | str = "auto",
+                 js_high: float | str | None = None, js_ratio: float = PAPER_JS_RATIO, n_ramp: int = 30,
+                 joint_gains: str = "inertia") -> None:
         if not isinstance(robot, NominalRobot):
             raise ControllerError("task_priority needs robot= a NominalRobot (a floating robot scenario)")
         self.base_reference = check_base_reference(base_reference)
@@ -339,6 +378,21 @@ class TaskPriority(Controller):
         self.allocator = Allocator(B, robot.thruster_lo, robot.thruster_hi) if B.shape[1] else None
         self.d = int(lay.base_dadr)
         self.joint_dofs = np.asarray(lay.joint_dadr, dtype=int)
+        if joint_gains not in JOINT_GAINS:
+            raise ControllerError(f"joint_gains = {joint_gains!r}; allowed: {', '.join(JOINT_GAINS)}")
+        self.joint_gains = joint_gains
+        if carry not in TP_CARRY_MODES:
+            raise ControllerError(f"carry = {carry!r}; allowed: {', '.join(TP_CARRY_MODES)}")
+        self.carry = carry
+        if int(n_ramp) != n_ramp or n_ramp < 1:
+            raise ControllerError(f"n_ramp = {n_ramp!r} must be an integer >= 1")
+        self.n_ramp = int(n_ramp)
+        self.resolved_params: dict[str, Any] = {"carry": carry}
+        if carry != "hold":  # the carry's thresholds as numbers (what a run records)
+            res = resolve_thresholds(robot, self.joint_dofs, [0, 1, 2], js, js_high, self.dls_threshold,
+                                     js_ratio=js_ratio)
+            self.js, self.js_high = res["js"], res["js_high"]
+            self.resolved_params.update({k: v for k, v in res.items() if k != "dls_threshold"})
 
     # ------------------------------------------------------------------ pieces
 
@@ -373,11 +427,18 @@ class TaskPriority(Controller):
         return [(J1, v1), (J2, v2), (J3, np.concatenate((v_pos, v_post)))], errors
 
     def _base_desired(self, t: float) -> tuple[np.ndarray, np.ndarray]:
-        """The vehicle origin's desired position and velocity at t (world [m], [m/s])."""
+        """The vehicle origin's desired position and velocity at t (world [m], [m/s]), plus the
+        carry's offset and velocity (module docstring "Reach"; zero before ``compute``)."""
+        off, v_off = getattr(self, "_carry", (np.zeros(3), np.zeros(3)))
         if self.base_trajectory is None:
-            return self.p_ref, np.zeros(3)
-        return (np.asarray(self.base_trajectory.position(t), dtype=float).reshape(3),
-                np.asarray(self.base_trajectory.velocity(t), dtype=float).reshape(3))
+            return self.p_ref + off, v_off
+        return (np.asarray(self.base_trajectory.position(t), dtype=float).reshape(3) + off,
+                np.asarray(self.base_trajectory.velocity(t), dtype=float).reshape(3) + v_off)
+
+    def _v_path(self, k: int) -> np.ndarray:
+        """The tip path's velocity over [k, k+1) [m/s, world]: the carry's velocity."""
+        t = (k - self.k0) * self.T + self.t0
+        return (self._tip_desired(t + self.T)[0] - self._tip_desired(t)[0]) / self.T
 
     def _tip_desired(self, t: float) -> tuple[np.ndarray, np.ndarray]:
         if self.trajectory is None:
@@ -409,7 +470,10 @@ class TaskPriority(Controller):
         self.kd = self.kd_given if self.kd_given is not None else 2.0 * self.zeta_ratio * wb * m
         self.q_ref = q.copy()           # integrated reference configuration q_r
         self.q_prev = q.copy()
-        self.k0 = measurement.k
+        self.k0, self.t0 = measurement.k, measurement.t
+        self._carry = (np.zeros(3), np.zeros(3))  # (offset of p_v,d [m], its velocity [m/s]) at this sample
+        self.singular = (SingularHandler(self.js, self.js_high, self.n_ramp, self._v_path, size=3, carry="path")
+                         if self.carry != "hold" else None)
 
     def _measured_velocity(self, m: Measurement, q: np.ndarray) -> np.ndarray:
         nv = self.robot.model.nv
@@ -430,7 +494,14 @@ class TaskPriority(Controller):
         if not self.feedforward:
             h = np.zeros(model.nv)
         jac = r.jacobians()
+        manip = None
+        if self.singular is not None:  # the carry (module docstring "Reach"): v over [k, k+1)
+            manip = manipulability(jac["tip_p"][:, self.joint_dofs])[0]
+            v_c = self.singular.update(measurement.k, manip)
+            self._carry = (self._carry[0], v_c)
         tasks, err = self.tasks(measurement.t, q, jac)
+        if self.singular is not None:
+            self._carry = (self._carry[0] + T * self._carry[1], self._carry[1])  # offset at k + 1
         sol = task_priority_velocity(tasks, self.priority_form, self.dls_threshold, self.dls_damping, self.rank_tol)
         zeta_r = sol["zeta"]
 
@@ -444,6 +515,11 @@ class TaskPriority(Controller):
             mujoco.mj_integratePos(model, qr, lead, 1.0)
             self.q_ref = qr
         u = self.kp * lead + self.kd * (zeta_r - zeta) + h
+        if self.joint_gains == "inertia" and self.kp_given is None and self.kd_given is None:
+            jd, w = self.joint_dofs, self.bandwidth_joints
+            M = np.zeros((model.nv, model.nv))
+            mujoco.mj_fullM(model, r.data, M)  # nominal, at q (hold_force set the state)
+            u[jd] = M[np.ix_(jd, jd)] @ (w * w * lead[jd] + 2.0 * self.zeta_ratio * w * (zeta_r - zeta)[jd]) + h[jd]
         # q_r(k+1) = q_r(k) (+) T zeta_r(k)
         mujoco.mj_integratePos(model, self.q_ref, zeta_r, T)
 
@@ -467,4 +543,6 @@ class TaskPriority(Controller):
             "wrench_body": wrench, "wrench_achieved": np.asarray(achieved, dtype=float),
             "thrust_saturated": np.asarray(saturated, dtype=bool),
         }
+        if manip is not None:
+            signals.update(manipulability=manip, singular_phase=self.singular.phase)
         return Command(thrust=np.asarray(thrust, dtype=float), torques=tau, signals=signals)
