@@ -3,11 +3,11 @@
  * "Waves"; the numpy twin is uvms_mj.physics.waves).
  *
  * A sea is a sum of components i = 1..n, each with amplitude a, angular frequency omega,
- * wavenumber k (the dispersion relation omega^2 = g k tanh(k h), Faltinsen 1990 eq. 2.9 /
- * DNV-RP-C205 eq. 3.2.2; deep water: omega^2 = g k), direction theta (of travel, world, from +x
+ * wavenumber k (the dispersion relation omega^2 = g k tanh(k h), Faltinsen 1990 table 2.1,
+ * DNV-RP-C205 sec. 3.2.2; deep water: omega^2 = g k), direction theta (of travel, world, from +x
  * towards +y) and phase phi; with the phase psi = k (x cos theta + y sin theta) - omega t + phi and
  * zeta = z - surface (<= 0 in the water), the linear potential-flow kinematics are
- * (Faltinsen 1990 table 2.1, DNV-RP-C205 table 3-1):
+ * (Faltinsen 1990 table 2.1, DNV-RP-C205 sec. 3.2.2):
  *   eta   = sum a cos psi
  *   u_h   = sum a omega       C(zeta) cos psi        (horizontal, along theta)
  *   w     = sum a omega       S(zeta) sin psi        (vertical)
