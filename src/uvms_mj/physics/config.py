@@ -280,7 +280,8 @@ def _parse_waves(ctx: "_Ctx", config: Mapping[str, str]) -> Waves:
             except ValueError:
                 raise ctx.error(key, v, "expected one integer") from None
     model = kw.get("model", "none")
-    for key, what in (("wave_height", "H for airy, Hs for a spectrum"), ("wave_period", "T for airy, Tp for a spectrum")):
+    for key, what in (("wave_height", "H for airy, Hs for a spectrum"),
+                      ("wave_period", "T for airy, Tp for a spectrum")):
         if model != "none" and WAVE_FIELDS[key] not in kw:
             raise ctx.error("wave_model", model, f"needs {key} (> 0: {what})")
     try:

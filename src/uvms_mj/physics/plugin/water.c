@@ -10,7 +10,8 @@
  *   (capability passive, compute does nothing, no state). Its init only checks that the model
  *   has a uvms.water instance and that the instance is attached to a body.
  *
- * uvms.water (one model-level instance, under <extension>): does all the work.
+ * uvms.water (one model-level instance, under <extension>): does all the work. Its wave_*
+ *   and surface attributes are parsed here (parse_waves) and the waves computed in waves.c.
  *   init:    finds every body whose body_plugin is a uvms.hydro instance, parses and validates
  *            every config (errors: mju_error with a one-line message naming the body, the
  *            attribute, the value and what is allowed; from Python this is a ValueError at
