@@ -408,3 +408,24 @@ def test_python_backend_matches_native_in_waves():
         q.append(p.data.qpos.copy())
     assert np.max(np.abs(q[0] - q[1])) <= 1e-9
     assert np.max(np.abs(q[0][:3] - (0, 0, -2.0))) > 1e-5  # the waves moved it
+
+
+def test_a_body_rising_above_the_surface_is_warned_about():
+    """During a run (the plant's per-sample signals) a centre of buoyancy above the mean surface warns
+    once, naming the body; below it nothing is said."""
+    from uvms_mj.plant.layout import InitialState
+    from uvms_mj.plant.plant import Plant
+
+    p = Plant("bluerov2_heavy", waves=Waves(model="airy", height=0.2, period=3.0, surface=-1.0),
+              initial=InitialState(position=(0, 0, -2.0)))
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        assert set(p.sea_signals()) == {"wave_elevation", "wave_velocity"}
+    p.data.qpos[2] = -0.5  # 0.5 m above the mean surface at z = -1
+    with pytest.warns(RuntimeWarning, match="above the mean surface"):
+        p.sea_signals()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        p.sea_signals()  # once
