@@ -27,6 +27,8 @@ from typing import Mapping
 import mujoco
 import numpy as np
 
+from uvms_mj.physics.waves import WAVE_MODELS, Waves
+
 WATER_PLUGIN = "uvms.water"
 HYDRO_PLUGIN = "uvms.hydro"
 
@@ -34,7 +36,14 @@ HYDRO_PLUGIN = "uvms.hydro"
 WATER_ATTRIBUTES = (
     "density", "current", "current_model", "gm_mean", "gm_sigma", "gm_tau",
     "gm_min", "gm_max", "gm_seed", "profile", "terms",
+    "wave_model", "wave_height", "wave_period", "wave_gamma", "wave_direction", "wave_spreading",
+    "wave_depth", "surface", "wave_seed", "wave_components",
 )
+#: The wave attributes and the :class:`~uvms_mj.physics.waves.Waves` field each one sets.
+WAVE_FIELDS = {
+    "wave_height": "height", "wave_period": "period", "wave_gamma": "gamma", "wave_direction": "direction",
+    "wave_spreading": "spreading", "wave_depth": "depth", "surface": "surface",
+}
 HYDRO_ATTRIBUTES = (
     "pos", "quat", "added_mass", "linear_damping", "quadratic_damping", "strips", "volume", "cob",
 )
@@ -67,6 +76,7 @@ class WaterParams:
         gm_seed: integer >= 0, seed of the counter-based noise.
         profile: (n, 4) knots (z, vx, vy, vz) with z strictly increasing; (0, 4) if none.
         terms: the terms that are on (a subset of :data:`TERMS`).
+        waves: the waves (:class:`~uvms_mj.physics.waves.Waves`; model "none": still water).
     """
 
     density: float = 1000.0
@@ -80,6 +90,7 @@ class WaterParams:
     gm_seed: int = 0
     profile: np.ndarray = None  # type: ignore[assignment]
     terms: frozenset = frozenset(TERMS)
+    waves: Waves = Waves()
 
     def __post_init__(self) -> None:
         defaults = {
@@ -253,6 +264,36 @@ def parse_body(body_name: str, config: Mapping[str, str]) -> BodyHydro:
     return BodyHydro(**kw)
 
 
+def _parse_waves(ctx: "_Ctx", config: Mapping[str, str]) -> Waves:
+    kw: dict = {}
+    if (v := _set(config, "wave_model")) is not None:
+        if v.strip() not in WAVE_MODELS:
+            raise ctx.error("wave_model", v, f"allowed: {', '.join(WAVE_MODELS)}")
+        kw["model"] = v.strip()
+    for key, field in WAVE_FIELDS.items():
+        if (v := _set(config, key)) is not None:
+            (kw[field],) = ctx.numbers(key, v, (1,))
+    for key, field in (("wave_seed", "seed"), ("wave_components", "n_components")):
+        if (v := _set(config, key)) is not None:
+            try:
+                kw[field] = int(v.strip())
+            except ValueError:
+                raise ctx.error(key, v, "expected one integer") from None
+    model = kw.get("model", "none")
+    for key, what in (("wave_height", "H for airy, Hs for a spectrum"),
+                      ("wave_period", "T for airy, Tp for a spectrum")):
+        if model != "none" and WAVE_FIELDS[key] not in kw:
+            raise ctx.error("wave_model", model, f"needs {key} (> 0: {what})")
+    try:
+        return Waves(**kw)
+    except ValueError as exc:  # "waves.<field> = <value>: <reason>": name the attribute instead
+        field, _, reason = str(exc).partition(" = ")
+        attrs = {f: k for k, f in WAVE_FIELDS.items()} | {"seed": "wave_seed", "n_components": "wave_components"}
+        key = attrs.get(field.removeprefix("waves."), "wave_model")
+        value, _, reason = reason.partition(": ")
+        raise ctx.error(key, str(config.get(key, value)), reason) from None
+
+
 def parse_water(config: Mapping[str, str]) -> WaterParams:
     """The `uvms.water` configuration (attribute -> string; empty = unset) as WaterParams."""
     ctx = _Ctx(WATER_PLUGIN)
@@ -314,6 +355,7 @@ def parse_water(config: Mapping[str, str]) -> WaterParams:
             if w not in TERMS:
                 raise ctx.error("terms", v, f"unknown term {w!r}; allowed: {', '.join(TERMS)}, or none")
         kw["terms"] = frozenset(words)
+    kw["waves"] = _parse_waves(ctx, config)
     model = kw.get("current_model", "constant")
     if model == "profile" and "profile" not in kw:
         raise ctx.error("current_model", model, "the profile model needs a 'profile'")

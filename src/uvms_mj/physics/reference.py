@@ -10,7 +10,8 @@ Conventions (docs/hydrodynamics.md):
 * h is a body's hydrodynamic frame: origin ``pos`` and orientation ``quat`` in the body frame;
   p is the world position of its origin, R its world orientation.
 * 6-vectors are in Fossen's order, linear first: nu = (v, w) in frame h; forces (f, m).
-* nu_r = nu - (R^T v_c, 0) is the velocity relative to the water.
+* nu_r = nu - (R^T v_c, 0) is the velocity relative to the water; v_c is the current plus the
+  waves' particle velocity at p (:func:`water_at`), each strip seeing the waves at its midpoint.
 
 Every function expects ``d`` to hold the kinematics of the current state:
 ``mj_kinematics`` + ``mj_comPos`` (+ ``mj_comVel`` for :func:`bias_acceleration` and
@@ -31,6 +32,7 @@ import mujoco
 import numpy as np
 
 from uvms_mj.physics.config import BodyHydro, WaterParams, resolve
+from uvms_mj.physics.waves import Sea, sea_of
 
 _MASK = (1 << 64) - 1
 
@@ -216,6 +218,35 @@ def current_at(water: WaterParams, state: CurrentState | None, t: float, z: floa
     return v_k + (t - t_k) * a_c, a_c
 
 
+def sea(m: mujoco.MjModel, water: WaterParams) -> Sea | None:
+    """The waves of ``water`` under the model's gravity (None without waves).
+
+    Raises:
+        ValueError: waves with gravity not along -z."""
+    if not water.waves.on:
+        return None
+    g = np.asarray(m.opt.gravity, float)
+    if not (g[0] == 0.0 and g[1] == 0.0 and g[2] < 0.0):
+        raise ValueError(f"uvms.water: waves need gravity along -z (opt.gravity = 0 0 -g, g > 0; got {g.tolist()})")
+    return sea_of(water.waves, float(-g[2]))
+
+
+def water_at(m: mujoco.MjModel, water: WaterParams, current_state: CurrentState | None, t: float,
+             p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Water velocity and acceleration (world) at the point p, time t: the current
+    (:func:`current_at` at z = p_z) plus the waves (:meth:`uvms_mj.physics.waves.Sea.kinematics`),
+
+        v = v_c + v_w,   a = a_c + dv_w/dt + (grad v_w) v   (the water's material acceleration).
+    """
+    v_c, a_c = current_at(water, current_state, t, float(p[2]), m.opt.timestep)
+    s = sea(m, water)
+    if s is not None:
+        v_w, a_w, grad = s.kinematics(t, p, gradient=True)
+        v_c = v_c + v_w
+        a_c = a_c + a_w + grad @ v_c
+    return v_c, a_c
+
+
 # ---------------------------------------------------------------------------------- terms
 
 
@@ -330,10 +361,6 @@ def froude_krylov(rho: float, volume: float, a_c: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------------- totals
 
 
-def _current(m, d, water, current_state, z):
-    return current_at(water, current_state, d.time, z, m.opt.timestep)
-
-
 def body_wrench(m: mujoco.MjModel, d: mujoco.MjData, water: WaterParams, b: int, hb: BodyHydro,
                 current_state: CurrentState | None = None) -> dict[str, np.ndarray]:
     """Each term of body b (resolved BodyHydro): frame-h wrenches 'added_mass', 'damping',
@@ -342,7 +369,7 @@ def body_wrench(m: mujoco.MjModel, d: mujoco.MjData, water: WaterParams, b: int,
     terms = water.terms
     p, R = hydro_frame(m, d, b, hb.pos, hb.quat)
     J = body_jacobian(m, d, b, hb.pos, hb.quat)
-    v_c, a_c = _current(m, d, water, current_state, p[2])
+    v_c, a_c = water_at(m, water, current_state, d.time, p)
     nu_r = J @ d.qvel - np.r_[R.T @ v_c, 0.0, 0.0, 0.0]
     out = {k: np.zeros(6) for k in ("added_mass", "damping", "strips")}
     out.update({k: np.zeros(3) for k in ("buoyancy", "froude_krylov")})
@@ -352,7 +379,16 @@ def body_wrench(m: mujoco.MjModel, d: mujoco.MjData, water: WaterParams, b: int,
     if "damping" in terms:
         out["damping"] = damping(hb.linear_damping, hb.quadratic_damping, nu_r)
     if "strips" in terms and hb.strips:
-        out["strips"] = strip_drag(water.density, hb.strips, nu_r)
+        s = sea(m, water)
+        if s is None:
+            out["strips"] = strip_drag(water.density, hb.strips, nu_r)
+        else:  # each strip sees the waves at its midpoint (uniform along it), plus the current at p
+            v_wp, _ = s.kinematics(d.time, p)
+            for st in hb.strips:
+                mid = p + R[:, st[0]] * 0.5 * (st[1] + st[2])
+                v_wm, _ = s.kinematics(d.time, mid)
+                nu_s = nu_r - np.r_[R.T @ (v_wm - v_wp), 0.0, 0.0, 0.0]
+                out["strips"] = out["strips"] + strip_drag(water.density, (st,), nu_s)
     if "buoyancy" in terms:
         out["buoyancy"] = buoyancy(water.density, hb.volume, m.opt.gravity)
     if "froude_krylov" in terms:
@@ -395,7 +431,7 @@ def added_kinetic_energy(m: mujoco.MjModel, d: mujoco.MjData, water: WaterParams
     for b, hb in bodies.items():
         hb = resolve(m, b, hb)
         p, R = hydro_frame(m, d, b, hb.pos, hb.quat)
-        v_c, _ = current_at(water, current_state, t, p[2], m.opt.timestep)
+        v_c, _ = water_at(m, water, current_state, t, p)
         nu_r = body_jacobian(m, d, b, hb.pos, hb.quat) @ d.qvel - np.r_[R.T @ v_c, 0.0, 0.0, 0.0]
         T += 0.5 * nu_r @ hb.added_mass @ nu_r
     return float(T)

@@ -66,6 +66,8 @@ from uvms_mj.plant.stepping import (  # noqa: F401  (DivergenceError, Energy, mu
 from uvms_mj.physics import model as _pm
 from uvms_mj.physics import python_backend as _pyb
 from uvms_mj.physics.current import Current
+from uvms_mj.physics.waves import Waves
+from uvms_mj.plant.sea import SeaMonitor, SurfaceError
 from uvms_mj.physics.thrusters import CurveInverse, thruster_curves
 
 __all__ = ["DivergenceError", "Energy", "Plant", "ThrusterFailure"]
@@ -105,6 +107,10 @@ class Plant(Stepping):
         current: the water current: 2 or 3 numbers (uniform, world frame, m/s) or a
             :class:`~uvms_mj.physics.current.Current` (Gauss-Markov, depth profile); default:
             the model's.
+        waves: linear waves (:class:`~uvms_mj.physics.waves.Waves`: Airy, JONSWAP,
+            Pierson-Moskowitz) set as the water plugin's attributes; default: the model's.
+            With waves on, a centre of buoyancy above the mean surface is refused at reset
+            and warned about during a run (:mod:`uvms_mj.plant.sea`).
         dead_zone: zero thrust commands inside the thrusters' dead zone: True (the band of the
             paper robot's parameters) or (low, high) [N].
         timestep, integrator: override the model's (e.g. ``integrator="RK4"``).
@@ -134,6 +140,7 @@ class Plant(Stepping):
         terms: HydroTerms = HydroTerms(),
         gravity: bool = True,
         current: Sequence[float] | Current | None = None,
+        waves: Waves | None = None,
         dead_zone: bool | Sequence[float] = False,
         timestep: float | None = None,
         integrator: str | None = None,
@@ -178,6 +185,10 @@ class Plant(Stepping):
             if current is not None:
                 _pm.set_water(spec, **water)
                 spec.option.wind = wind  # MuJoCo's own fluid model (drag="mujoco") sees it too
+            if waves is not None:
+                if not isinstance(waves, Waves):
+                    raise ParameterError(f"waves = {waves!r} must be a uvms_mj.physics.waves.Waves")
+                _pm.set_water(spec, **waves.attributes())
             _pm.set_water(spec, terms=water_terms(terms))
             if payload is not None:
                 site = payload.site or tip_site or next(
@@ -262,6 +273,8 @@ class Plant(Stepping):
         self._serving: dict[int, _pyb.Served] = {}  # Python backend: mjData address -> its server
         if not native:
             self._serve(self.data)
+        #: The waves at the vehicle (logged signals, the free-surface check).
+        self.sea = SeaMonitor(m, lay.base_body)
         self.reset()
 
     # ---------------------------------------------------------------- hydrodynamics hook
@@ -351,6 +364,15 @@ class Plant(Stepping):
         if served is not None:
             served.reset(float(d.time))
         mujoco.mj_forward(m, d)
+        try:
+            self.sea.check_initial(d.qpos)
+        except SurfaceError as exc:
+            raise ParameterError(str(exc)) from None
+
+    def sea_signals(self) -> dict:
+        """The waves at the vehicle now (``wave_elevation``, ``wave_velocity``; empty without
+        waves), for the sampled loop's log (:mod:`uvms_mj.plant.sea`)."""
+        return self.sea.signals(float(self.data.time), self.data.qpos)
 
     def on_sample(self, t: float) -> None:
         """Called by the sampled loop at every control sample (time t [s]): the scheduled events

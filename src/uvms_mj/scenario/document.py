@@ -36,6 +36,8 @@ A null default is the robot's own, filled in when the scenario is validated (``u
       current: null             # world [m/s] (older spelling of current.velocity); null: still water
       payload: null             # {mass, t, site, ...}: picked up during the run
     current: null               # {velocity} | {gauss_markov: {...}} | {profile: [...]}
+    waves: null                 # {model: airy|jonswap|pierson_moskowitz, height|hs, period|tp, gamma,
+                                #   direction, spreading, depth (null: deep), surface, seed, n_components}
     thrusters:                  # lag, limits, dead zone (null: the model's), failures
       tau: null
       force_range: null
@@ -121,7 +123,8 @@ from uvms_mj.scenario.paper import (
 )
 from uvms_mj.scenario.paths import Arm, TrajectorySection, tip_path
 from uvms_mj.scenario.robot import mjcf_nominal_issues, mjcf_plant_issues, mjcf_thrusters_issues
-from uvms_mj.scenario.sections import CurrentSection, Initial, PlantSection, ThrustersSection, Vehicle, vehicle_issues
+from uvms_mj.scenario.sections import (CurrentSection, Initial, PlantSection, ThrustersSection, Vehicle, WavesSection,
+                                       vehicle_issues)
 
 __all__ = ["DEFAULT_CONTROLLER", "DEFAULT_DURATION", "DEFAULT_PERIOD", "Scenario", "controllers_for", "robot_model"]
 
@@ -244,6 +247,8 @@ class Scenario(_Section):
                              "initial keyframe, else qpos0)")
     current: CurrentSection | None = Field(None, description="the water current (constant, gauss_markov, profile); "
                                            "plant.current is the older spelling of a constant one")
+    waves: WavesSection | None = Field(None, description="linear waves (airy, jonswap, pierson_moskowitz); the "
+                                       "current adds to them; null: the model's (none in the shipped models)")
     vehicle: Vehicle = Field(default_factory=Vehicle, description="the vehicle's setpoint or trajectory")
     sensors: Sensors = Field(default_factory=Sensors)
     trajectory: TrajectorySection | None = Field(

@@ -441,6 +441,7 @@ def build(scenario: Scenario) -> tuple[Plant, Any]:
             gravity=pl.gravity,
             current=(sc.current.current(sc.seed) if sc.current is not None
                      else tuple(pl.current) if pl.current is not None else None),
+            waves=sc.waves.waves(sc.seed) if sc.waves is not None else None,
             # the paper's thrusters: the plant's dead-zone switch (the band is in its parameters, above);
             # MJCF thrusters: the thruster plugin's band (an override, above)
             dead_zone=bool(th.dead_zone) if sc.robot == "paper" else False,

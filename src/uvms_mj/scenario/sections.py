@@ -15,6 +15,7 @@ import numpy as np
 from pydantic import Field, model_validator
 
 from uvms_mj.physics.current import Current
+from uvms_mj.physics.waves import DEFAULT_COMPONENTS, DEFAULT_GAMMA, MAX_COMPONENTS, MAX_SPREADING, Waves
 from uvms_mj.plant.errors import ParameterError
 from uvms_mj.plant.layout import InitialState
 from uvms_mj.plant.plant import ThrusterFailure
@@ -23,7 +24,7 @@ from uvms_mj.scenario.base import _NO_VALUE as _NO
 from uvms_mj.scenario.base import CURRENT_MAX, DURATION_MAX, FORCE_MAX, SEED_MAX, TAU_MAX, Hydro, _Issues, _Section
 
 __all__ = ["CurrentSection", "Failure", "Initial", "Orientation", "PayloadSection", "PlantSection", "Setpoint", "ThrustersSection",
-           "Vehicle"]
+           "Vehicle", "WavesSection"]
 
 #: Bounds (as the paper scenario's).
 POSITION_MAX = 1000.0  # [m] |initial.position|, |vehicle.setpoint.position|
@@ -134,6 +135,49 @@ class CurrentSection(_Section):
         return Current(model=self.model, velocity=tuple(self.velocity), mean=gm.mean, sigma=gm.sigma, tau=gm.tau,
                        vmin=gm.min, vmax=gm.max, seed=int(gm.seed if gm.seed is not None else seed) % 2**64,
                        profile=[(k.z, *(list(k.velocity) + [0.0] * (3 - len(k.velocity)))) for k in self.profile or []])
+
+
+class WavesSection(_Section):
+    """Linear waves (:class:`uvms_mj.physics.waves.Waves`; docs/hydrodynamics.md "Waves"): a regular
+    Airy wave or an irregular sea from a JONSWAP or Pierson-Moskowitz spectrum; the current adds to
+    them. ``height``/``hs`` and ``period``/``tp`` are two spellings of one field each (give one)."""
+
+    model: Literal["airy", "jonswap", "pierson_moskowitz"]
+    height: float | None = Field(None, gt=0, le=30.0, description="airy: wave height H = 2a; spectra: Hs [m]")
+    hs: float | None = Field(None, gt=0, le=30.0, description="the significant wave height Hs [m] (= height)")
+    period: float | None = Field(None, gt=0, le=60.0, description="airy: period T; spectra: peak period Tp [s]")
+    tp: float | None = Field(None, gt=0, le=60.0, description="the peak period Tp [s] (= period)")
+    gamma: float = Field(DEFAULT_GAMMA, ge=1.0, le=7.0, description="JONSWAP peak enhancement factor")
+    direction: float = Field(0.0, ge=-360.0, le=360.0, description="mean direction of travel, world, from +x "
+                             "towards +y, in angle_unit")
+    angle_unit: Literal["deg", "rad"] = "deg"
+    spreading: float = Field(0.0, ge=0.0, le=MAX_SPREADING, description="cos^n spreading exponent n (0: "
+                             "long-crested)")
+    depth: float | None = Field(None, gt=0, le=11000.0, description="water depth [m]; null: deep water")
+    surface: float = Field(0.0, ge=-11000.0, le=1000.0, description="world z of the mean surface [m]")
+    seed: int | None = Field(None, ge=0, le=SEED_MAX, description="random phases; null: the scenario's seed")
+    n_components: int = Field(DEFAULT_COMPONENTS, ge=1, le=MAX_COMPONENTS, description="components of a spectrum")
+
+    @model_validator(mode="after")
+    def _one_spelling(self) -> "WavesSection":
+        for a, b in (("height", "hs"), ("period", "tp")):
+            va, vb = getattr(self, a), getattr(self, b)
+            if va is not None and vb is not None:
+                raise _Issues([((b,), f"give {a} or {b}, not both", vb)])
+            if va is None and vb is None:
+                raise _Issues([((a,), f"waves need {a} (or {b})", _NO)])
+        if self.model == "airy" and self.hs is not None:
+            raise _Issues([(("hs",), "a regular (airy) wave takes height (H = 2a), not hs", self.hs)])
+        return self
+
+    def waves(self, seed: int) -> Waves:
+        """As :class:`uvms_mj.physics.waves.Waves` (``seed``: the scenario's, unless given)."""
+        d = self.direction if self.angle_unit == "rad" else math.radians(self.direction)
+        return Waves(model=self.model, height=float(self.height if self.height is not None else self.hs),
+                     period=float(self.period if self.period is not None else self.tp), gamma=self.gamma,
+                     direction=d, spreading=self.spreading, depth=0.0 if self.depth is None else self.depth,
+                     surface=self.surface, seed=int(self.seed if self.seed is not None else seed) % 2**64,
+                     n_components=self.n_components)
 
 
 class Failure(_Section):

@@ -237,6 +237,7 @@ def run_closed_loop(
         return Measurement(k=k, t=k * T, q=q, qd=qd)
 
     on_event = getattr(plant, "on_sample", None)  # scheduled plant events (e.g. a payload pick-up)
+    sea_signals = getattr(plant, "sea_signals", None)  # the waves at the vehicle (none without waves)
     exact = layout is None and per_signal is None and not (noisy or quantized or sensor.velocity_sensor
                                                           or sensor.delay)  # q = q_true
     # the state at each sample: observed once, then read by each step (Plant.step_observe: the
@@ -270,6 +271,8 @@ def run_closed_loop(
                "thrust_command": thrust,
                "thrust_force": thr_lagged if thr_lagged is not None and k > 0 else plant.thruster_forces,
                "torques": torques}
+        if sea_signals is not None:
+            row.update(sea_signals())
         rows.append(row)
         if sink is not None:
             sink(k * T, row)

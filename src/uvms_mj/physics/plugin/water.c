@@ -10,7 +10,8 @@
  *   (capability passive, compute does nothing, no state). Its init only checks that the model
  *   has a uvms.water instance and that the instance is attached to a body.
  *
- * uvms.water (one model-level instance, under <extension>): does all the work.
+ * uvms.water (one model-level instance, under <extension>): does all the work. Its wave_*
+ *   and surface attributes are parsed here (parse_waves) and the waves computed in waves.c.
  *   init:    finds every body whose body_plugin is a uvms.hydro instance, parses and validates
  *            every config (errors: mju_error with a one-line message naming the body, the
  *            attribute, the value and what is allowed; from Python this is a ValueError at
@@ -34,6 +35,9 @@
  *            4. strips: closed-form integrals of |w_n| w_n and s |w_n| w_n (strip_integrals);
  *            5. buoyancy -rho V g and 6. Froude-Krylov rho V a_c, both at the centre of
  *               buoyancy (moved to p as a force plus the moment (cob - p) x F);
+ *            waves (waves.c, when wave_model is not none): v_c and a_c at p gain the waves'
+ *            particle velocity and local acceleration at p; each strip sees the waves at its
+ *            midpoint instead (plus the current at p);
  *            qfrc_passive += J^T (tau_A + tau_D + tau_strip at p; forces at cob), which is what
  *            mj_applyFT computes.
  *            How (same maths, without mj_jac, mj_jacDot or mj_applyFT, which zero and fill
@@ -81,6 +85,8 @@
 
 #include <mujoco/mujoco.h>
 
+#include "waves.h"
+
 #ifndef M_PI
 #define M_PI 3.14159265358979323846
 #endif
@@ -89,7 +95,10 @@
 
 static const char* const water_attributes[] = {
     "density", "current", "current_model", "gm_mean", "gm_sigma", "gm_tau",
-    "gm_min",  "gm_max",  "gm_seed",       "profile", "terms"};
+    "gm_min",  "gm_max",  "gm_seed",       "profile", "terms",
+    /* waves (waves.c; docs/hydrodynamics.md "Waves"), appended: m->plugin_attr keeps this order */
+    "wave_model", "wave_height", "wave_period", "wave_gamma", "wave_direction", "wave_spreading",
+    "wave_depth", "surface", "wave_seed", "wave_components"};
 #define WATER_NATTR ((int)(sizeof(water_attributes) / sizeof(water_attributes[0])))
 
 static const char* const hydro_attributes[] = {"pos",               "quat",   "added_mass",
@@ -141,6 +150,8 @@ typedef struct {
   int nknot;
   double* knots;             /* z vx vy vz per knot */
   int terms;
+  waves_params_t wave;       /* the waves' config (waves.h) */
+  waves_t waves;             /* their components (n = 0: no waves) */
   /* bodies */
   int nbody;
   hbody_t* bodies;
@@ -570,6 +581,7 @@ static void free_water(water_t* w) {
     free(w->bodies);
   }
   free(w->knots);
+  uvms_waves_free(&w->waves);
   free(w->Mcopy);
   free(w->active);
   free(w->fdof);
@@ -579,6 +591,94 @@ static void free_water(water_t* w) {
   free(w->J);
   free(w->W);
   free(w);
+}
+
+/* an integer seed attribute (unset: *out untouched) */
+static void parse_seed(const mjModel* m, int inst, const char* who, const char* key, uint64_t* out,
+                       err_t* e) {
+  char sb[200];
+  const char* sv = config(m, inst, key);
+  if (sv) {
+    const char* p = sv;
+    while (is_space(*p)) p++;
+    const char* q = p;
+    while (*q >= '0' && *q <= '9') q++;
+    const char* r = q;
+    while (is_space(*r)) r++;
+    char* end = NULL;
+    unsigned long long s = 0;
+    int ok = q > p && !*r;
+    if (ok) {
+      errno = 0;
+      s = strtoull(p, &end, 10);
+      ok = end == q && errno == 0;
+    }
+    if (!ok)
+      fail(e, "%s: %s = \"%s\": expected 1 integer >= 0 (at most 18446744073709551615)", who, key,
+           shown(sv, sb, sizeof(sb)));
+    else
+      *out = (uint64_t)s;
+  }
+}
+
+/* the wave attributes (docs/hydrodynamics.md "Waves") */
+static void parse_waves(const mjModel* m, int inst, water_t* w, err_t* e) {
+  const char* who = "uvms.water";
+  char sb[200];
+  int c1[] = {1};
+  waves_params_t* p = &w->wave;
+  memset(p, 0, sizeof(*p));
+  p->model = WAVES_NONE;
+  p->gamma = 3.3;
+  p->ncomp = WAVES_DEFAULT_COMPONENTS;
+  const char* mv = config(m, inst, "wave_model");
+  if (mv) {
+    char word[64], rest[8];
+    if (sscanf(mv, " %63s", word) != 1) word[0] = 0;
+    int extra = sscanf(mv, " %*63s %7s", rest) == 1;
+    if (!extra && !strcmp(word, "none"))
+      p->model = WAVES_NONE;
+    else if (!extra && !strcmp(word, "airy"))
+      p->model = WAVES_AIRY;
+    else if (!extra && !strcmp(word, "jonswap"))
+      p->model = WAVES_JONSWAP;
+    else if (!extra && !strcmp(word, "pierson_moskowitz"))
+      p->model = WAVES_PM;
+    else
+      fail(e, "%s: wave_model = \"%s\": unknown; allowed: none, airy, jonswap, pierson_moskowitz", who,
+           shown(mv, sb, sizeof(sb)));
+  }
+  double x = 0.0;
+  if (read_numbers(m, inst, who, "wave_height", &p->height, c1, 1, "1 number (m, > 0)", e) > 0)
+    check_all(who, "wave_height", config(m, inst, "wave_height"), &p->height, 1, 1, "> 0", e);
+  if (read_numbers(m, inst, who, "wave_period", &p->period, c1, 1, "1 number (s, > 0)", e) > 0)
+    check_all(who, "wave_period", config(m, inst, "wave_period"), &p->period, 1, 1, "> 0", e);
+  if (read_numbers(m, inst, who, "wave_gamma", &p->gamma, c1, 1, "1 number (1 <= gamma <= 7)", e) > 0 &&
+      !(p->gamma >= 1.0 && p->gamma <= 7.0))
+    fail(e, "%s: wave_gamma = %g: must be in [1, 7] (DNV-RP-C205 3.5.5)", who, p->gamma);
+  read_numbers(m, inst, who, "wave_direction", &p->direction, c1, 1, "1 number (rad, world)", e);
+  if (read_numbers(m, inst, who, "wave_spreading", &p->spreading, c1, 1, "1 number (>= 0)", e) > 0 &&
+      !(p->spreading >= 0.0 && p->spreading <= WAVES_MAX_SPREADING))
+    fail(e, "%s: wave_spreading = %g: must be in [0, %g] (cos^n exponent n; 0: long-crested)", who,
+         p->spreading, WAVES_MAX_SPREADING);
+  if (read_numbers(m, inst, who, "wave_depth", &p->depth, c1, 1, "1 number (m, > 0; 0: deep water)", e) > 0)
+    check_all(who, "wave_depth", config(m, inst, "wave_depth"), &p->depth, 1, 0, ">= 0 (0: deep water)", e);
+  read_numbers(m, inst, who, "surface", &p->surface, c1, 1, "1 number (m, world z)", e);
+  parse_seed(m, inst, who, "wave_seed", &p->seed, e);
+  if (read_numbers(m, inst, who, "wave_components", &x, c1, 1, "1 integer in [1, 10000]", e) > 0) {
+    if (!(x >= 1 && x <= WAVES_MAX_COMPONENTS && x == floor(x)))
+      fail(e, "%s: wave_components = %g: expected 1 integer in [1, %d]", who, x, WAVES_MAX_COMPONENTS);
+    else
+      p->ncomp = (int)x;
+  }
+  if (p->model != WAVES_NONE && !e->failed) {
+    if (!(p->height > 0.0))
+      fail(e, "%s: wave_model = %s needs wave_height (m, > 0: H for airy, Hs for a spectrum)", who,
+           mv);
+    else if (!(p->period > 0.0))
+      fail(e, "%s: wave_model = %s needs wave_period (s, > 0: T for airy, Tp for a spectrum)", who,
+           mv);
+  }
 }
 
 static void parse_water(const mjModel* m, int inst, water_t* w, err_t* e) {
@@ -629,28 +729,7 @@ static void parse_water(const mjModel* m, int inst, water_t* w, err_t* e) {
   }
 
   w->seed = 0;
-  const char* sv = config(m, inst, "gm_seed");
-  if (sv) {
-    const char* p = sv;
-    while (is_space(*p)) p++;
-    const char* q = p;
-    while (*q >= '0' && *q <= '9') q++;
-    const char* r = q;
-    while (is_space(*r)) r++;
-    char* end = NULL;
-    unsigned long long s = 0;
-    int ok = q > p && !*r;
-    if (ok) {
-      errno = 0;
-      s = strtoull(p, &end, 10);
-      ok = end == q && errno == 0;
-    }
-    if (!ok)
-      fail(e, "%s: gm_seed = \"%s\": expected 1 integer >= 0 (at most 18446744073709551615)", who,
-           shown(sv, sb, sizeof(sb)));
-    else
-      w->seed = (uint64_t)s;
-  }
+  parse_seed(m, inst, who, "gm_seed", &w->seed, e);
 
   const char* pv = config(m, inst, "profile");
   if (pv && !e->failed) {
@@ -669,6 +748,8 @@ static void parse_water(const mjModel* m, int inst, water_t* w, err_t* e) {
   if (w->model == CURRENT_PROFILE && !e->failed && w->nknot == 0)
     fail(e, "%s: current_model = \"profile\" needs a profile: 'z vx vy vz' knots separated by ';'",
          who);
+
+  parse_waves(m, inst, w, e);
 
   w->terms = TERM_ALL;
   const char* tv = config(m, inst, "terms");
@@ -892,6 +973,15 @@ static int water_init(const mjModel* m, mjData* d, int instance) {
   }
   w->instance = instance;
   parse_water(m, instance, w, &e);
+  if (!e.failed && w->wave.model != WAVES_NONE) {
+    const double* gv = m->opt.gravity;
+    char werr[200];
+    if (!(gv[0] == 0.0 && gv[1] == 0.0 && gv[2] < 0.0))
+      fail(&e, "uvms.water: waves need gravity along -z (opt.gravity = 0 0 -g, g > 0; got %g %g %g): "
+           "the mean surface is a plane z = surface", gv[0], gv[1], gv[2]);
+    else if (uvms_waves_build(&w->wave, -gv[2], &w->waves, werr, sizeof(werr)))
+      fail(&e, "uvms.water: waves: %s", werr);
+  }
 
   int nb = 0;
   for (int b = 1; b < m->nbody; b++)
@@ -1075,7 +1165,7 @@ static void water_compute(const mjModel* m, mjData* d, int instance, int capabil
     const int use_strip = (terms & TERM_STRIPS) && hb->nstrip;
     const int use_buoy = (terms & TERM_BUOYANCY) && hb->volume != 0.0;
     const int use_fk = (terms & TERM_FROUDE_KRYLOV) && hb->volume != 0.0 &&
-                       w->model == CURRENT_GAUSS_MARKOV;
+                       (w->model == CURRENT_GAUSS_MARKOV || w->waves.n);
     if (!hb->nc || !(use_am || use_damp || use_strip || use_buoy || use_fk)) continue;
 
     /* frame h: R = xmat * hmat, p = xpos + xmat pos */
@@ -1110,6 +1200,15 @@ static void water_compute(const mjModel* m, mjData* d, int instance, int capabil
 
     double vc[3], ac[3], vch[3], ach[3];
     current_at(w, s, d->time, p, vc, ac);
+    double vwp[3] = {0, 0, 0}; /* the waves at p (world) */
+    if (w->waves.n) {
+      /* v_c += v_w; a_c += dv_w/dt + grad(v_w) (v_c + v_w): the material acceleration of the water */
+      double awp[3], gw[9];
+      uvms_waves_kinematics(&w->waves, d->time, p, vwp, awp, gw);
+      for (int c = 0; c < 3; c++) vc[c] += vwp[c];
+      for (int c = 0; c < 3; c++)
+        ac[c] += awp[c] + gw[3 * c] * vc[0] + gw[3 * c + 1] * vc[1] + gw[3 * c + 2] * vc[2];
+    }
     mulT3(vch, R, vc);
     double nur[6] = {nu[0] - vch[0], nu[1] - vch[1], nu[2] - vch[2], nu[3], nu[4], nu[5]};
     const double* vr = nur;
@@ -1222,13 +1321,32 @@ static void water_compute(const mjModel* m, mjData* d, int instance, int capabil
         double e[3] = {0, 0, 0}, wxe[3];
         e[ax] = 1.0;
         cross3(wxe, wv, e);
+        /* waves: the flow of the strip is the current at p plus the waves at the strip's midpoint
+         * (uniform along the strip), instead of the waves at p */
+        const double* vrs = vr;
+        double vrw[3];
+        if (w->waves.n) {
+          double mid[3], em[3], pm[3], vwm[3], awm[3], dvw[3], dvh[3];
+          const double sm = 0.5 * (st->s0 + st->s1);
+          em[0] = em[1] = em[2] = 0.0;
+          em[ax] = sm;
+          mul3(mid, R, em);
+          pm[0] = p[0] + mid[0];
+          pm[1] = p[1] + mid[1];
+          pm[2] = p[2] + mid[2];
+          uvms_waves_kinematics(&w->waves, d->time, pm, vwm, awm, NULL);
+          for (int c = 0; c < 3; c++) dvw[c] = vwm[c] - vwp[c];
+          mulT3(dvh, R, dvw);
+          for (int c = 0; c < 3; c++) vrw[c] = vr[c] - dvh[c];
+          vrs = vrw;
+        }
         int idx = 0;
         for (int n = 0; n < 3; n++) {
           if (n == ax) continue;
           double cd = st->cd[idx++];
           if (cd == 0.0) continue;
           double i0, i1;
-          strip_integrals(vr[n], wxe[n], st->s0, st->s1, &i0, &i1);
+          strip_integrals(vrs[n], wxe[n], st->s0, st->s1, &i0, &i1);
           double c = half_rho * cd;
           /* force -c I0 along n; moment about the origin: (e x n) (-c I1) */
           tau[n] -= c * i0;
