@@ -9,8 +9,11 @@ underwater robot with 2 link manipulator": a floating base with 3 thrusters carr
     >>> plant.step(120)          # 1 s at the default 1/120 s step (RK4)
 
 Importing the package only defines names: the public ones below are imported on first access.
-Nothing is compiled or registered, no environment variable is set and no signal handler is
-installed at import. The uvms MuJoCo plugins are built (C compiler, cached) and registered with
+Nothing is compiled, no environment variable is set and no signal handler is installed at import.
+The one registration: the gymnasium ids ``uvms_mj/Tracking-v0`` and ``uvms_mj/TrackingResidual-v0``
+(:mod:`uvms_mj.rl.registration`): at once if gymnasium is imported already, else by a finder on
+``sys.meta_path`` that waits for gymnasium's import (gymnasium itself is never imported here, and
+nothing happens if it is not installed). The uvms MuJoCo plugins are built (C compiler, cached) and registered with
 MuJoCo when the first model that uses them is loaded (:func:`uvms_mj.physics.build.register_plugins`,
 which every loader calls); the OpenGL backend is chosen when rendering starts
 (:mod:`uvms_mj.analysis.render_gl`); the command line installs its Ctrl-C / SIGTERM handling when
@@ -41,6 +44,11 @@ _EXPORTS = {
 
 __all__ = sorted(_EXPORTS)
 __version__ = "0.1.0"
+
+
+from uvms_mj.rl.registration import register_when_imported as _register_gym
+
+_register_gym()
 
 
 def __getattr__(name: str) -> object:

@@ -9,6 +9,8 @@ from pathlib import Path
 import click
 import numpy as np
 
+from uvms_mj.scenario.packaged import packaged_scenarios, resolve_scenario, scenarios_dir  # noqa: F401  (importable from here)
+
 EXIT_DIVERGED = 3
 EXIT_RENDER = 4
 EXIT_IO = 5
@@ -120,37 +122,19 @@ def _write_json(data: dict, dest: str) -> None:
         Path(dest).write_text(text + "\n")
 
 
-def scenarios_dir() -> Path:
-    """The scenario files shipped with the package (the repository's ``scenarios/`` in a checkout)."""
-    pkg = Path(__file__).resolve().parents[1]  # the uvms_mj package folder
-    for cand in (pkg.parents[1] / "scenarios", pkg / "scenarios"):
-        if cand.is_dir() and any(cand.glob("*.yaml")):
-            return cand
-    return pkg / "scenarios"
-
-
-def packaged_scenarios() -> list[str]:
-    """Names of the packaged scenarios (``uvms-mj run NAME``)."""
-    return sorted(p.stem for p in scenarios_dir().glob("*.yaml"))
-
-
 class ScenarioPath(click.ParamType):
-    """A scenario file, or the name of a packaged scenario when no such file exists."""
+    """A scenario file, or the name of a packaged scenario when no such file exists
+    (:func:`uvms_mj.scenario.packaged.resolve_scenario`)."""
 
     name = "SCENARIO"
 
     def convert(self, value, param, ctx):
-        p = Path(value)
-        if p.is_file():
-            return str(p)
-        if p.exists():
-            self.fail(f"{value!r} is not a file", param, ctx)
-        if p.name == str(value):  # a bare name: a packaged scenario
-            cand = scenarios_dir() / (value if value.endswith((".yaml", ".yml")) else f"{value}.yaml")
-            if cand.is_file():
-                return str(cand)
-        self.fail(f"{value!r}: no such file, nor a packaged scenario ({', '.join(packaged_scenarios())})",
-                  param, ctx)
+        from uvms_mj.scenario.base import ScenarioError
+
+        try:
+            return str(resolve_scenario(value))
+        except ScenarioError as exc:
+            self.fail(str(exc), param, ctx)
 
 
 SCENARIO = ScenarioPath()

@@ -92,28 +92,26 @@ nominal model, straight 0.3 m tip path at 0.02 m/s, ``rac_dob``).
 from __future__ import annotations
 
 import collections
-import copy
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, Sequence
 
 import mujoco
 import numpy as np
 
 try:  # dm-control is an extra: `pip install 'uvms-mj[rl]'` (the rest of uvms_mj does not need it)
-    from dm_control import mujoco as dm_mujoco
-    from dm_control.mujoco import wrapper
     from dm_control.rl import control
     from dm_env import specs
 except ImportError as exc:  # pragma: no cover - exercised only without the extra
     raise ImportError(f"uvms_mj.rl.env needs dm-control ({exc}): pip install 'uvms-mj[rl]'") from None
 
 from uvms_mj.control.base import Command, Controller, Measurement
-from uvms_mj.sim.loop import SensorModel
-from uvms_mj.plant.params import JOINT_MOTORS, THRUSTERS, TIP_SITE
+from uvms_mj.control.trajectories.base import Trajectory
 from uvms_mj.plant.plant import DivergenceError, Plant
-from uvms_mj.control.trajectories import Line3D
+from uvms_mj.rl.layout import action_bounds, action_names, observation_names
+from uvms_mj.rl.physics import Physics, Sensor
+from uvms_mj.sim.loop import COMMAND_ABS_MAX, SensorModel
 
 __all__ = [
     "DEFAULT_TORQUE_LIMIT",
@@ -124,7 +122,8 @@ __all__ = [
     "from_plant",
 ]
 
-#: Bound on the joint torques [N m] (the model's motors are unlimited; the paper gives none).
+#: Bound on the joint torques [N m] where the model gives none (the paper's motors are unlimited; the
+#: paper gives no limit): six times the largest torque rac_dob uses in the paper's experiment (3.4 N m).
 DEFAULT_TORQUE_LIMIT = 20.0
 
 
@@ -149,151 +148,22 @@ class RewardWeights:
                 raise ValueError(f"reward weight {name} = {v!r} must be finite and >= 0")
 
 
-# --------------------------------------------------------------------------- physics
-
-
-class Physics(dm_mujoco.Physics):
-    """A dm_control Physics over a :class:`~uvms_mj.plant.plant.Plant`'s own data.
-
-    It wraps ``plant.data`` (served by the plant's hydrodynamics) and steps it with
-    ``plant.step`` (``mj_step`` each physics step, for every integrator, exactly the plant's
-    stepping; dm_control's ``legacy_step`` only adds an ``mj_step1`` afterwards to bring the
-    position- and velocity-dependent fields up to date, which does not change the state).
-
-    A divergence (:class:`~uvms_mj.plant.plant.DivergenceError`) does not raise: it is kept in
-    :attr:`divergence`, further steps do nothing, and :meth:`reset` (or ``plant.reset()``
-    followed by ``physics.divergence = None``) clears it. :meth:`copy` returns a physics over a
-    copy of the data, registered with the plant (hydrodynamics included; its divergence is then
-    only MuJoCo's own warnings, raised as ``PhysicsError``).
-    """
-
-    _plant: Plant
-    divergence: DivergenceError | None
-
-    def __init__(self, plant: Plant) -> None:
-        if not isinstance(plant, Plant):
-            raise TypeError(f"Physics expects a uvms_mj Plant, got {type(plant).__name__}")
-        self._plant = plant
-        self.divergence = None
-        super().__init__(wrapper.MjData(plant.data))
-
-    @property
-    def plant(self) -> Plant:
-        """The plant whose model (and hydrodynamics) this physics runs."""
-        return self._plant
-
-    @property
-    def owns_plant_data(self) -> bool:
-        """Whether this physics runs ``plant.data`` itself (False for copies)."""
-        return self.data.ptr is self._plant.data
-
-    def step(self, nstep: int = 1) -> None:
-        if self.divergence is not None:
-            return
-        m, d = self.model.ptr, self.data.ptr
-        if self.owns_plant_data:
-            try:
-                self._plant.step(nstep)  # checks MuJoCo's warnings itself
-            except DivergenceError as exc:
-                self.divergence = exc
-                return
-        else:
-            with self.check_invalid_state():
-                mujoco.mj_step(m, d, nstep)
-        if self.legacy_step:
-            mujoco.mj_step1(m, d)
-
-    def reset(self, keyframe_id: int | None = None) -> None:
-        self.divergence = None
-        if self.owns_plant_data:
-            self._plant.reset(None)  # clears the plant's divergence record too
-        super().reset(keyframe_id)
-
-    def copy(self, share_model: bool = True) -> "Physics":
-        """A physics over a copy of the data (same model, registered with the plant).
-
-        Raises:
-            ValueError: ``share_model=False``: the hydrodynamics are installed on the plant's
-                model, a copied model would run without them.
-        """
-        if not share_model:
-            raise ValueError("uvms_mj Physics.copy needs share_model=True: the hydrodynamics are served "
-                             "for the plant's own model only")
-        new_data = self._plant.attach_data(copy.copy(self.data.ptr))
-        new = Physics.__new__(Physics)
-        new._plant = self._plant
-        new.divergence = self.divergence
-        new._warnings_cause_exception = True
-        new._reload_from_data(wrapper.MjData(new_data))
-        new.legacy_step = self.legacy_step
-        return new
-
-    def _make_rendering_contexts(self) -> None:
-        """dm_control's contexts, with the OpenGL backend chosen now that rendering starts: on
-        Linux without a display and ``MUJOCO_GL`` unset, EGL (else OSMesa) instead of the GLFW
-        default dm_control took (:func:`uvms_mj.analysis.render_gl.dm_control_context_class`)."""
-        from dm_control import _render
-
-        from uvms_mj.analysis.render_gl import dm_control_context_class
-
-        default, _render.Renderer = _render.Renderer, dm_control_context_class()
-        try:
-            super()._make_rendering_contexts()
-        finally:
-            _render.Renderer = default
-
-    def __getstate__(self):  # noqa: D105
-        raise TypeError("a uvms_mj Physics cannot be pickled (it lives on its plant, whose hydrodynamics it shares)")
-
-
-# --------------------------------------------------------------------------- sensor
-
-
-class _Sensor:
-    """The measurement of :func:`uvms_mj.sim.loop.run_closed_loop` (same draws in the same order)."""
-
-    def __init__(self, model: SensorModel, seed: int, T: float) -> None:
-        self.model = model
-        self.rng = np.random.default_rng(seed)
-        self.T = T
-        self.q_prev: np.ndarray | None = None
-
-    def measure(self, k: int, q: np.ndarray, qd: np.ndarray) -> Measurement:
-        s, rng = self.model, self.rng
-        noise = np.r_[rng.normal(0, s.position_noise, 2), rng.normal(0, s.angle_noise, 3)] \
-            if (s.position_noise or s.angle_noise) else 0.0
-        q = q + noise
-        q = np.r_[_quantize(q[:2], s.position_quantum), _quantize(q[2:], s.angle_quantum)]
-        qd_meas = None
-        if s.velocity_sensor:
-            qd_meas = qd + (rng.normal(0, s.velocity_noise, 5) if s.velocity_noise else 0.0)
-        if s.delay:
-            q_out = q if self.q_prev is None else self.q_prev
-            self.q_prev = q
-            q = q_out
-        return Measurement(k=k, t=k * self.T, q=q, qd=qd_meas)
-
-
-def _quantize(x: np.ndarray, quantum: float) -> np.ndarray:
-    return np.round(x / quantum) * quantum if quantum > 0 else x
-
-
 # --------------------------------------------------------------------------- task
 
 
 class TrackingTask(control.Task):
-    """End-tip tracking of a straight path, plain or residual (see the module docstring).
+    """End-tip tracking, plain or residual, on any robot (see the module docstring).
 
     Args:
-        plant: the plant (its model gives the thruster bounds and actuator names).
-        trajectory: the desired end-tip path.
+        plant: the plant (its model gives the actuators, their bounds and the observation layout).
+        trajectory: the desired end-tip path (None: hold the tip where the episode starts).
         T: control period [s] (a whole number of plant steps).
         time_limit: episode length [s] (for the ``time_to_go`` observation).
         controller: residual mode: the controller whose command the action adds to; None: plain.
         sensor: the controller's measurement model (residual mode).
         warm_start: start the thrusters' lag state at the first thrust command.
         weights: reward weights.
-        torque_limit: joint torque bound [N m] (action and residual).
+        torque_limit: joint torque bound [N m] where the model gives none (action and residual).
         divergence_penalty: reward of the step on which the plant diverged.
         random: a seed, a ``numpy.random.RandomState`` or None (seeds the sensor noise).
     """
@@ -301,7 +171,7 @@ class TrackingTask(control.Task):
     def __init__(
         self,
         plant: Plant,
-        trajectory: Line3D,
+        trajectory: Trajectory | None,
         T: float,
         time_limit: float,
         controller: Controller | None = None,
@@ -315,8 +185,6 @@ class TrackingTask(control.Task):
         if not isinstance(random, np.random.RandomState):
             random = np.random.RandomState(random)
         self._random = random
-        if not (math.isfinite(torque_limit) and torque_limit > 0):
-            raise ValueError(f"torque_limit = {torque_limit!r} N m must be finite and > 0")
         if not (math.isfinite(divergence_penalty) and divergence_penalty >= 0):
             raise ValueError(f"divergence_penalty = {divergence_penalty!r} must be finite and >= 0")
         self.plant = plant
@@ -330,37 +198,41 @@ class TrackingTask(control.Task):
         self.torque_limit = float(torque_limit)
         self.divergence_penalty = float(divergence_penalty)
 
-        m = plant.model
-        ids = lambda names: np.array([mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_ACTUATOR, n) for n in names])  # noqa: E731
-        thr, mot = ids(THRUSTERS), ids(JOINT_MOTORS)
-        if not np.all(m.actuator_ctrllimited[thr]):
-            raise ValueError("the thruster actuators must have a ctrlrange")
-        self._thr_lo, self._thr_hi = (np.array(v, dtype=float) for v in m.actuator_ctrlrange[thr].T)
-        self._thr_act = m.actuator_actadr[thr]
-        self._force_lo, self._force_hi = (np.array(v, dtype=float) for v in m.actuator_forcerange[thr].T)
-        tq = np.full(2, self.torque_limit)
-        mot_limited = m.actuator_ctrllimited[mot].astype(bool)
-        tq_lo, tq_hi = -tq.copy(), tq.copy()
-        tq_lo[mot_limited] = np.maximum(tq_lo[mot_limited], m.actuator_ctrlrange[mot][mot_limited, 0])
-        tq_hi[mot_limited] = np.minimum(tq_hi[mot_limited], m.actuator_ctrlrange[mot][mot_limited, 1])
-        name = "\t".join(THRUSTERS + JOINT_MOTORS)
-        if controller is None:
-            lo, hi = np.r_[self._thr_lo, tq_lo], np.r_[self._thr_hi, tq_hi]
-        else:
-            span = self._thr_hi - self._thr_lo
-            lo, hi = np.r_[-span, -tq], np.r_[span, tq]
-        self._action_spec = specs.BoundedArray((5,), np.float64, lo, hi, name=name)
+        m, lay = plant.model, plant.layout
+        self.layout = lay
+        lo, hi = action_bounds(m, lay, self.torque_limit, bool(getattr(plant, "_direct", True)))
+        self.n_thrusters = n_thr = len(lay.thruster_names)
+        if controller is not None:  # residual: full authority on thrust, the torque bound's magnitude
+            lo, hi = np.r_[-(hi[:n_thr] - lo[:n_thr]), -np.maximum(-lo[n_thr:], hi[n_thr:])], \
+                np.r_[hi[:n_thr] - lo[:n_thr], np.maximum(-lo[n_thr:], hi[n_thr:])]
+        #: the action's component names (thrusters, then motors)
+        self.action_names = action_names(lay)
+        self._action_spec = specs.BoundedArray((lo.size,), np.float64, lo, hi, name="\t".join(self.action_names))
+        #: observation key -> the names of its components (:func:`uvms_mj.rl.layout.observation_names`)
+        self.observation_names = observation_names(m, lay, controller is not None)
         self._tip_scratch = mujoco.MjData(m)  # kinematics only: no passive stage, no callback
-        self._tip_site = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_SITE, TIP_SITE)
-        self._goal = np.asarray(trajectory.target, dtype=float)[:2]  # the paper's plane (x, y)
+        self._tip_site = lay.tip_site
+        self._axes = list(lay.plane_axes)
+        a = lay.base_qadr
+        self._base_q = slice(a, a + lay.base_nq)
+        nd = int(lay.base_dofs.size)
+        self._base_v = slice(lay.base_dadr, lay.base_dadr + nd)
+        if lay.base_free:
+            self._pos_idx, self._att_idx = np.arange(a, a + 3), None
+        else:
+            hinge = int(m.jnt_qposadr[lay.base_hinge]) if lay.base_hinge >= 0 else None
+            self._pos_idx = np.array([i for i in range(a, a + lay.base_nq) if i != hinge], dtype=int)
+            self._att_idx = hinge
 
         #: set by :func:`from_plant`: the Environment flattens the observations.
         self.flat_observation = False
         self.k = 0  #: control samples since the start of the episode
         self.sensor_seed: int | None = None  #: the sensor generator's seed of this episode
         self.command: Command | None = None  #: residual mode: the controller's current command
-        self._ref = np.zeros(3)
-        self._sensor: _Sensor | None = None
+        self._ref = plant.data.qpos.copy()
+        self._hold = np.zeros(len(self._axes))
+        self._goal = np.zeros(len(self._axes))
+        self._sensor: Sensor | None = None
 
     @property
     def random(self) -> np.random.RandomState:
@@ -370,18 +242,29 @@ class TrackingTask(control.Task):
     def residual(self) -> bool:
         return self.controller is not None
 
+    @property
+    def flat_observation_names(self) -> list[str]:
+        """``key.component`` for every entry of the flattened observation (``flat_observation=True``:
+        the keys in spec order, each key's components in order)."""
+        return [f"{key}.{name}" for key, names in self.observation_names.items() for name in names]
+
     # ---------------------------------------------------------------- episode
 
     def initialize_episode(self, physics: Physics) -> None:
         plant = physics.plant
-        plant.reset()  # the paper's initial state (keyframe), the plant's divergence cleared
+        physics.drop_payload()
+        plant.reset()  # the initial state (keyframe or the scenario's), the plant's divergence cleared
         physics.divergence = None
         self.k = 0
-        self._ref = plant.data.qpos[:3].copy()
+        self._ref = plant.data.qpos.copy()
+        if self._tip_site >= 0:
+            self._hold = self._tip(self._ref)
+            self._goal = self._target_at(max(self.time_limit, 0.0), goal=True)
         self.sensor_seed = int(self._random.randint(2**31 - 1))
         self.command = None
+        plant.on_sample(0.0)  # the scheduled events at t = 0 (as run_closed_loop)
         if self.controller is not None:
-            self._sensor = _Sensor(self.sensor_model, self.sensor_seed, self.T)
+            self._sensor = Sensor(self.sensor_model, self.sensor_seed, self.T, plant)
             meas = self._measure(physics)
             self.controller.reset(meas)
             self._compute(physics, meas)
@@ -394,9 +277,13 @@ class TrackingTask(control.Task):
         cmd = self.controller.compute(meas)
         thrust = np.asarray(cmd.thrust, dtype=float)
         torques = np.asarray(cmd.torques, dtype=float)
-        if not (np.all(np.isfinite(thrust)) and np.all(np.isfinite(torques))):
+        out = np.r_[thrust.ravel(), torques.ravel()]
+        if not np.all(np.isfinite(out)):
             physics.divergence = DivergenceError(self.k * self.T, "controller output not finite")
-            thrust, torques = np.zeros(3), np.zeros(2)
+        elif out.size and np.max(np.abs(out)) > COMMAND_ABS_MAX:
+            physics.divergence = DivergenceError(self.k * self.T, f"controller command beyond {COMMAND_ABS_MAX:g}")
+        if physics.divergence is not None:
+            thrust, torques = np.zeros(thrust.size), np.zeros(torques.size)
         self.command = Command(thrust=thrust, torques=torques, signals=cmd.signals)
 
     def before_step(self, action: Any, physics: Physics) -> None:
@@ -407,18 +294,21 @@ class TrackingTask(control.Task):
         if not np.all(np.isfinite(a)):
             raise ValueError(f"action {a!r} must be finite")
         a = np.clip(a, spec.minimum, spec.maximum)
+        n = self.n_thrusters
         if self.command is not None:
-            thrust, torques = self.command.thrust + a[:3], self.command.torques + a[3:]
+            thrust, torques = self.command.thrust + a[:n], self.command.torques + a[n:]
         else:
-            thrust, torques = a[:3], a[3:]
+            thrust, torques = a[:n], a[n:]
         plant = physics.plant
         plant.set_thrust(thrust)
         plant.set_joint_torques(torques)
         if self.k == 0 and self.warm_start:
-            physics.data.act[self._thr_act] = np.clip(thrust, self._force_lo, self._force_hi)
+            plant.warm_start(thrust)
 
     def after_step(self, physics: Physics) -> None:
         self.k += 1
+        if physics.divergence is None:
+            physics.plant.on_sample(self.k * self.T)
         if self.controller is not None and physics.divergence is None:
             self._compute(physics, self._measure(physics))
 
@@ -430,49 +320,71 @@ class TrackingTask(control.Task):
     def observation_spec(self, physics: Physics) -> collections.OrderedDict:
         if self.flat_observation:
             raise NotImplementedError  # the Environment infers the flattened spec
-        shapes = [("base_pose", 3), ("joint_angles", 2), ("base_velocity", 3), ("joint_velocities", 2),
-                  ("tip", 2), ("target", 2), ("goal", 2), ("time_to_go", 1), ("thrust", 3)]
-        if self.controller is not None:
-            shapes.append(("base_command", 5))
-        return collections.OrderedDict((k, specs.Array((n,), np.float64, name=k)) for k, n in shapes)
+        return collections.OrderedDict((k, specs.Array((len(v),), np.float64, name=k))
+                                       for k, v in self.observation_names.items())
 
     def _tip(self, qpos: np.ndarray) -> np.ndarray:
         s = self._tip_scratch
         s.qpos[:] = qpos
         mujoco.mj_kinematics(s.model, s)
-        return s.site_xpos[self._tip_site, :2].copy()
+        return s.site_xpos[self._tip_site, self._axes].copy()
+
+    def _target_at(self, t: float, goal: bool = False) -> np.ndarray:
+        """The desired tip position at t (the path's, else the tip where the episode started);
+        ``goal``: a straight line's end point, another path's position at t."""
+        traj = self.trajectory
+        if traj is None:
+            return self._hold.copy()
+        end = getattr(traj, "target", None) if goal else None
+        p = np.asarray(traj.position(t) if end is None else end, dtype=float)
+        return p[self._axes].copy()
 
     def get_observation(self, physics: Physics) -> collections.OrderedDict:
         d = physics.data
         q, qd = d.qpos.copy(), d.qvel.copy()
+        lay = self.layout
         t = self.k * self.T
         obs = collections.OrderedDict(
-            base_pose=q[:3],
-            joint_angles=q[3:5],
-            base_velocity=qd[:3],
-            joint_velocities=qd[3:5],
-            tip=self._tip(q),
-            target=np.asarray(self.trajectory.position(t), dtype=float)[:2],
-            goal=self._goal.copy(),
-            time_to_go=np.array([max(self.time_limit - t, 0.0)]),
-            thrust=np.clip(d.act[self._thr_act], self._force_lo, self._force_hi),
+            base_pose=q[self._base_q],
+            joint_angles=q[lay.joint_qadr],
+            base_velocity=qd[self._base_v],
+            joint_velocities=qd[lay.joint_dadr],
         )
+        if self._tip_site >= 0:
+            obs.update(tip=self._tip(q), target=self._target_at(t), goal=self._goal.copy())
+        obs["time_to_go"] = np.array([max(self.time_limit - t, 0.0)])
+        obs["thrust"] = physics.plant.thruster_forces if physics.owns_plant_data else np.zeros(self.n_thrusters)
         if self.controller is not None:
             cmd = self.command
-            obs["base_command"] = np.r_[cmd.thrust, cmd.torques] if cmd is not None else np.zeros(5)
+            obs["base_command"] = np.r_[cmd.thrust, cmd.torques] if cmd is not None else np.zeros(spec_size(self))
+        if len(obs) != len(self.observation_names):  # a robot without arm joints: no joint entries
+            obs = collections.OrderedDict((k, obs[k]) for k in self.observation_names)
         if physics.divergence is not None:
             for key, val in obs.items():
                 obs[key] = np.nan_to_num(val, nan=0.0, posinf=0.0, neginf=0.0)
         return obs
 
+    def errors(self, qpos: np.ndarray) -> tuple[float, float, float]:
+        """(tip, base position, base attitude) errors of the reward at ``qpos`` (sample k): |p_tip -
+        p_ed(kT)| [m] (0 without a tip site), |p0 - p0_ref| [m], the attitude error's angle [rad]."""
+        e_tip = (float(np.linalg.norm(self._tip(qpos) - self._target_at(self.k * self.T)))
+                 if self._tip_site >= 0 else 0.0)
+        e_base = float(np.linalg.norm(qpos[self._pos_idx] - self._ref[self._pos_idx]))
+        if self.layout.base_free:
+            qa, qr = qpos[self._base_q][3:7], self._ref[self._base_q][3:7]
+            c = abs(float(np.dot(qa, qr))) / max(float(np.linalg.norm(qa) * np.linalg.norm(qr)), 1e-300)
+            e_att = 2.0 * math.acos(min(1.0, c))
+        elif self._att_idx is not None:
+            e_att = abs(math.remainder(float(qpos[self._att_idx] - self._ref[self._att_idx]), 2 * math.pi))
+        else:
+            e_att = 0.0
+        return e_tip, e_base, e_att
+
     def get_reward(self, physics: Physics) -> float:
         if physics.divergence is not None:
             return -self.divergence_penalty
-        q = physics.data.qpos
         w = self.weights
-        e_tip = float(np.linalg.norm(self._tip(q) - np.asarray(self.trajectory.position(self.k * self.T))[:2]))
-        e_base = float(np.hypot(q[0] - self._ref[0], q[1] - self._ref[1]))
-        e_att = abs(math.remainder(float(q[2] - self._ref[2]), 2 * math.pi))
+        e_tip, e_base, e_att = self.errors(physics.data.qpos)
         r = -(w.tip * e_tip + w.base * e_base + w.attitude * e_att)
         return r if math.isfinite(r) else -self.divergence_penalty
 
@@ -480,12 +392,17 @@ class TrackingTask(control.Task):
         return 0.0 if physics.divergence is not None else None
 
 
+def spec_size(task: TrackingTask) -> int:
+    """Number of components of the task's action."""
+    return int(task.action_spec(None).shape[0])
+
+
 # --------------------------------------------------------------------------- constructors
 
 
 def from_plant(
     plant: Plant,
-    trajectory: Line3D,
+    trajectory: Trajectory | None,
     *,
     controller: Controller | None = None,
     T: float = 1.0 / 60.0,
@@ -528,32 +445,42 @@ def load(
     scenario: Any = None,
     time_limit: float | None = None,
     random: int | np.random.RandomState | None = None,
+    sets: Sequence[str] = (),
     **kwargs: Any,
 ) -> control.Environment:
-    """The tracking environment of a scenario (see the module docstring).
+    """The tracking environment of a scenario, for any robot (see the module docstring).
 
     Args:
         residual: the action adds to the source controller's command (``rac_dob`` by default).
-        scenario: a :class:`~uvms_mj.scenario.schema.Scenario`, the path of a scenario YAML file, a
-            :class:`~uvms_mj.sim.experiment.PaperExperiment`, or None (``Scenario()``: the paper's
-            experiment). Gives the plant, path, controller (period T, residual base), sensor
-            model, warm start and default duration.
+        scenario: a :class:`~uvms_mj.scenario.schema.Scenario`; a scenario file path or the name of
+            a packaged scenario (``"bluerov2_alpha_circle_current"``), resolved as the command line
+            does (:func:`uvms_mj.scenario.packaged.resolve_scenario`); a
+            :class:`~uvms_mj.sim.experiment.PaperExperiment`; or None (``Scenario()``: the paper's
+            experiment). Gives the plant, path, controller (period T, residual base), sensor model,
+            warm start and default duration, built as ``uvms-mj run`` builds them
+            (:func:`uvms_mj.scenario.schema.build`).
         time_limit: episode length [s]; default the source's duration (40 s for the paper).
         random: seed or ``numpy.random.RandomState`` (sensor noise of the residual controller).
+        sets: ``key.path=value`` overrides of a scenario file or name (``uvms-mj run --set``).
         **kwargs: ``reward_weights``, ``torque_limit``, ``divergence_penalty``, ``legacy_step``,
             ``flat_observation`` (see :func:`from_plant`).
 
     Raises:
-        uvms_mj.scenario.schema.ScenarioError: an invalid scenario file or combination.
-        ValueError: bad time_limit or controller period.
+        uvms_mj.scenario.schema.ScenarioError: an unknown scenario name, an invalid scenario file or
+            combination (one line per problem, naming the file and the field).
+        TypeError: ``scenario`` of another type (the message names the type).
+        ValueError: bad time_limit, controller period or action bounds.
     """
+    from uvms_mj.scenario.packaged import resolve_scenario
+    from uvms_mj.scenario.schema import Scenario, ScenarioError, build, load_scenario, sensor_model
     from uvms_mj.sim.experiment import PaperExperiment
-    from uvms_mj.scenario.schema import Scenario, build, load_scenario, sensor_model
 
     if scenario is None:
         scenario = Scenario()
     elif isinstance(scenario, (str, Path)):
-        scenario = load_scenario(scenario)
+        scenario = load_scenario(resolve_scenario(scenario), sets)
+    elif sets:
+        raise TypeError("sets= applies to a scenario file or name only")
     if isinstance(scenario, PaperExperiment):
         plant, ctrl = scenario.build()
         sensor, warm, duration = scenario.sensor, scenario.warm_start, scenario.duration
@@ -562,11 +489,17 @@ def load(
         sensor = sensor_model(scenario)
         warm, duration = scenario.warm_start, scenario.duration
     else:
-        raise TypeError(f"scenario = {scenario!r} must be a Scenario, a scenario file path, a PaperExperiment or None")
+        raise TypeError(f"scenario: expected a Scenario, a scenario file path or name, a PaperExperiment or None, "
+                        f"got {type(scenario).__name__}")
     T = float(getattr(ctrl, "T", 1.0 / 60.0))
     trajectory = getattr(ctrl, "trajectory", None)
-    if not isinstance(trajectory, Line3D):
-        raise ValueError(f"controller {getattr(ctrl, 'name', ctrl)!r} exposes no straight-line (Line3D) trajectory")
-    return from_plant(plant, trajectory, controller=ctrl if residual else None, T=T,
-                      time_limit=duration if time_limit is None else float(time_limit), sensor=sensor,
-                      warm_start=warm, random=random, **kwargs)
+    if trajectory is not None and not isinstance(trajectory, Trajectory):
+        trajectory = None
+    try:
+        return from_plant(plant, trajectory, controller=ctrl if residual else None, T=T,
+                          time_limit=duration if time_limit is None else float(time_limit), sensor=sensor,
+                          warm_start=warm, random=random, **kwargs)
+    except ValueError as exc:
+        if isinstance(scenario, Scenario):
+            raise ScenarioError(f"scenario {scenario.name!r}: {exc}") from None
+        raise
