@@ -77,10 +77,10 @@ def test_export_wide(short_log, tmp_path, fmt):
     if fmt == "csv":
         header = out.read_text().splitlines()[0].split(",")
         data = np.loadtxt(out, delimiter=",", skiprows=1)
-        assert header[:3] == ["t", "q_true[0]", "q_true[1]"]
+        assert header[:3] == ["t", "q_true[base_x]", "q_true[base_y]"]  # named (tests/test_export_names.py)
         np.testing.assert_array_equal(data[:, 0], log.t)
-        np.testing.assert_array_equal(data[:, header.index("q_true[4]")], q[:, 4])
-        assert "e_p[3]" in header and len(data) == len(log.t)
+        np.testing.assert_array_equal(data[:, header.index("q_true[joint2]")], q[:, 4])
+        assert "e_p[tip_x]" in header and len(data) == len(log.t)
     elif fmt == "npz":
         z = np.load(out)
         np.testing.assert_array_equal(z["q_true"], q)
@@ -89,7 +89,7 @@ def test_export_wide(short_log, tmp_path, fmt):
         import pyarrow.parquet as pq
 
         table = pq.read_table(out)
-        np.testing.assert_array_equal(table.column("q_true[2]").to_numpy(), q[:, 2])
+        np.testing.assert_array_equal(table.column("q_true[base_yaw]").to_numpy(), q[:, 2])
     else:
         import scipy.io
 
@@ -103,8 +103,13 @@ def test_export_channels_layout(short_log, tmp_path):
     assert result.exit_code == 0, result.output
     state = (tmp_path / "d" / "state_true.csv").read_text().splitlines()[0].split(",")
     control = (tmp_path / "d" / "control.csv").read_text().splitlines()[0].split(",")
-    assert state[0] == control[0] == "t" and "q_true[0]" in state and "q_true[0]" not in control
-    assert "e_p[0]" in control
+    assert state[0] == control[0] == "t" and "q_true[base_x]" in state and "q_true[base_x]" not in control
+    assert "e_p[base_x]" in control
+    result = CliRunner().invoke(main, ["export", str(short_log), "--layout", "channels", "--columns", "index",
+                                       "-o", str(tmp_path / "i")])
+    assert result.exit_code == 0, result.output
+    state = (tmp_path / "i" / "state_true.csv").read_text().splitlines()[0].split(",")
+    assert state[:3] == ["t", "q_true[0]", "q_true[1]"]
 
 
 @pytest.mark.parametrize("fmt, module", [("parquet", "pyarrow"), ("mat", "scipy.io")])

@@ -107,18 +107,24 @@ def info(log: str) -> None:
 @click.option("-o", "--out", type=click.Path(), default=None,
               help="Output file (wide csv/parquet, npz, mat; default LOG.<format>) or folder (channels "
                    "csv/parquet; default LOG-export/).")
-def export(log: str, fmt: str, layout: str, out: str | None) -> None:
+@click.option("--columns", type=click.Choice(["named", "index"]), default="named", show_default=True,
+              help="named: vector components by joint, axis and thruster from the log's robot layout "
+                   "(q_true[alpha_shoulder], thrust_force[bluerov2_t1], tip_true[z]; the index where a name "
+                   "is unknown); index: x[0], x[1]... everywhere.")
+def export(log: str, fmt: str, layout: str, out: str | None, columns: str) -> None:
     """Export LOG's per-sample signals as CSV, Parquet, NumPy .npz or MATLAB .mat.
 
     \b
-    Columns: t [s], then each signal; a vector x gives x[0], x[1]...; a matrix x[i,j]
-    (row-major); booleans 0/1; NaN empty in CSV. npz and mat keep the logged shapes and add
-    meta_json (metadata and status). See uvms_mj.io.export."""
+    Columns: t [s], then each signal; a vector gives one column per component, named by
+    joint, axis and thruster (q_true[base_x], torques[joint1]; x[0], x[1]... where a name is
+    unknown, or with --columns index); a matrix x[i,j] (row-major); booleans 0/1; NaN empty
+    in CSV. npz and mat keep the logged shapes and add meta_json (metadata and status) and
+    columns_json (the component names). See uvms_mj.io.export."""
     from uvms_mj.io.export import ExportError, export_log
 
     run_log = _read(log)
     try:
-        paths = export_log(run_log, fmt, out, layout=layout, log_path=log)
+        paths = export_log(run_log, fmt, out, layout=layout, log_path=log, columns=columns)
     except ExportError as exc:
         click.echo(f"error: {exc}", err=True)
         sys.exit(2)

@@ -10,19 +10,30 @@ Layouts:
 * ``channels``: one table per sample channel of the log, ``state_true`` (``/state/true``) and
   ``control`` (``/control``), each with its own ``t`` column.
 
-Columns: a scalar signal is one column named like the signal; a vector ``x`` of n values gives
-``x[0]`` .. ``x[n-1]``; a matrix gives ``x[i,j]`` (row-major). Booleans are 0/1, NaN stays NaN
-(empty in CSV). CSV and Parquet write one file per table: ``-o`` is the file (wide, default
+Columns: a scalar signal is one column named like the signal; a vector ``x`` gives one column
+per component, named from the robot's layout in the log's metadata (``--columns named``, the
+default): ``q_true[base_x]``, ``q_true[base_qw]``, ``q_true[alpha_shoulder]``, ``tip_true[z]``,
+``thrust_force[bluerov2_t7]``, ``torques[joint1]``, ``u_B[fx]``, ``e_p[tip_y]``... (the names of
+each signal: :mod:`uvms_mj.io.columns`); where a name is unknown (a signal not in that table, a
+size that does not match the layout), the component's index: ``x[0]`` .. ``x[n-1]``, as
+``--columns index`` gives for every signal. A matrix gives ``x[i,j]`` (row-major). Booleans are
+0/1, NaN stays NaN (empty in CSV). CSV and Parquet write one file per table: ``-o`` is the file (wide, default
 ``LOG.csv`` / ``LOG.parquet``) or the folder (channels, default ``LOG-export/``, files
 ``state_true.csv`` and ``control.csv``).
 
 ``npz`` and ``mat`` are one file (default ``LOG.npz`` / ``LOG.mat``) holding the arrays with
 their logged shapes (no flattening): ``t`` and one array per signal (wide), or
 ``<channel>/<signal>`` keys (npz) and one struct per channel (mat), plus ``meta_json``, the
-log's metadata and status as JSON text. MATLAB names must be identifiers: ``e_p`` stays
+log's metadata and status as JSON text, and ``columns_json``, each signal's component names
+(JSON: signal -> list of names, null where unknown; Parquet files carry it in their schema
+metadata as ``uvms_mj_columns``).
+
+:func:`to_dataframe` (or ``read_log(path, as_dataframe=True)``) gives the wide table as a pandas
+DataFrame indexed by ``t`` [s], with the same column names, booleans as bool, and the log's
+metadata in ``df.attrs["meta"]`` (``status``, ``reason`` too); pandas is in the ``[export]`` extra. MATLAB names must be identifiers: ``e_p`` stays
 ``e_p``; any other character becomes ``_``.
 
-Parquet needs pyarrow and mat needs scipy: ``pip install 'uvms-mj[export]'``.
+Parquet needs pyarrow, mat scipy, DataFrames pandas: ``pip install 'uvms-mj[export]'``.
 """
 
 from __future__ import annotations
@@ -34,10 +45,12 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["FORMATS", "LAYOUTS", "ExportError", "export_log", "tables"]
+__all__ = ["COLUMNS", "FORMATS", "LAYOUTS", "ExportError", "export_log", "tables", "to_dataframe"]
 
 FORMATS = ("csv", "parquet", "npz", "mat")
 LAYOUTS = ("wide", "channels")
+#: Column naming: by the robot's layout (index where unknown), or by index everywhere.
+COLUMNS = ("named", "index")
 #: Table names of the sample channels.
 CHANNEL_TABLES = {"/state/true": "state_true", "/control": "control"}
 
@@ -46,18 +59,31 @@ class ExportError(RuntimeError):
     """A format whose optional dependency is missing (one-line message saying what to install)."""
 
 
-def _columns(name: str, arr: np.ndarray) -> list[tuple[str, np.ndarray]]:
+def _columns(name: str, arr: np.ndarray, labels: list[str] | None = None,
+             keep_bool: bool = False) -> list[tuple[str, np.ndarray]]:
     arr = np.asarray(arr)
-    if arr.dtype == bool:
+    if arr.dtype == bool and not keep_bool:
         arr = arr.astype(np.int8)
     if arr.ndim == 1:
         return [(name, arr)]
+    if labels is not None and arr.ndim == 2 and len(labels) == arr.shape[1]:
+        return [(f"{name}[{label}]", arr[:, j]) for j, label in enumerate(labels)]
     flat = arr.reshape(len(arr), -1)
     shape = arr.shape[1:]
     out = []
     for j, idx in enumerate(np.ndindex(*shape)):
         out.append((f"{name}[{','.join(map(str, idx))}]", flat[:, j]))
     return out
+
+
+def _labels(log, columns: str) -> dict[str, list[str] | None]:
+    if columns not in COLUMNS:
+        raise ValueError(f"columns = {columns!r}: use one of {', '.join(COLUMNS)}")
+    if columns == "index":
+        return {}
+    from uvms_mj.io.columns import component_names
+
+    return component_names(log)
 
 
 def _groups(log) -> dict[str, list[str]]:
@@ -70,10 +96,13 @@ def _groups(log) -> dict[str, list[str]]:
     return {"state_true": state, "control": control}
 
 
-def tables(log, layout: str = "wide") -> dict[str, dict[str, np.ndarray]]:
-    """Table name -> ordered column name -> 1-D array (see the module docstring)."""
+def tables(log, layout: str = "wide", columns: str = "named",
+           keep_bool: bool = False) -> dict[str, dict[str, np.ndarray]]:
+    """Table name -> ordered column name -> 1-D array (see the module docstring); ``columns``:
+    "named" (by the robot's layout) or "index"; ``keep_bool``: booleans as bool (else 0/1)."""
     if layout not in LAYOUTS:
         raise ValueError(f"layout = {layout!r}: use one of {', '.join(LAYOUTS)}")
+    labels = _labels(log, columns)
     t = np.asarray(log.t, dtype=float)
     groups = _groups(log)
     if layout == "wide":
@@ -84,9 +113,28 @@ def tables(log, layout: str = "wide") -> dict[str, dict[str, np.ndarray]]:
             continue
         cols: dict[str, np.ndarray] = {"t": t}
         for n in names:
-            cols.update(_columns(n, log.signals[n]))
+            cols.update(_columns(n, log.signals[n], labels.get(n), keep_bool))
         out[table] = cols
     return out
+
+
+def to_dataframe(log, columns: str = "named"):
+    """The wide table as a pandas DataFrame indexed by ``t`` [s] (module docstring).
+
+    Raises:
+        ExportError: pandas is not installed (one line saying what to install).
+    """
+    try:
+        import pandas as pd
+    except ImportError:
+        raise ExportError("DataFrames need pandas: pip install 'uvms-mj[export]' (or pip install pandas)") from None
+    cols = tables(log, "wide", columns, keep_bool=True)["wide"]
+    t = cols.pop("t")
+    df = pd.DataFrame(cols, index=pd.Index(t, name="t"))
+    df.attrs["meta"] = dict(getattr(log, "meta", {}) or {})
+    df.attrs["status"] = getattr(log, "status", None)
+    df.attrs["reason"] = getattr(log, "reason", None)
+    return df
 
 
 def _meta_json(log) -> str:
@@ -114,11 +162,11 @@ def _write_csv(cols: dict[str, np.ndarray], path: Path) -> None:
             f.write(",".join("" if np.isnan(v) else repr(float(v)) for v in row) + "\n")
 
 
-def _write_parquet(cols: dict[str, np.ndarray], path: Path, meta: str) -> None:
+def _write_parquet(cols: dict[str, np.ndarray], path: Path, meta: str, names: str) -> None:
     pa = _require("pyarrow", "parquet")
     pq = _require("pyarrow.parquet", "parquet")
     table = pa.table({k: np.asarray(v) for k, v in cols.items()})
-    table = table.replace_schema_metadata({"uvms_mj": meta})
+    table = table.replace_schema_metadata({"uvms_mj": meta, "uvms_mj_columns": names})
     pq.write_table(table, str(path))
 
 
@@ -128,12 +176,13 @@ def _mat_name(name: str) -> str:
 
 
 def export_log(log, fmt: str, out: str | Path | None = None, layout: str = "wide",
-               log_path: str | Path | None = None) -> list[Path]:
+               log_path: str | Path | None = None, columns: str = "named") -> list[Path]:
     """Write ``log`` (a :func:`~uvms_mj.io.recorder.read_log` result) in ``fmt``; returns the files.
+    ``columns``: "named" (by the robot's layout, index where unknown) or "index".
 
     Raises:
         ExportError: parquet without pyarrow, mat without scipy.
-        ValueError: unknown format or layout.
+        ValueError: unknown format, layout or columns.
     """
     if fmt not in FORMATS:
         raise ValueError(f"format = {fmt!r}: use one of {', '.join(FORMATS)}")
@@ -145,13 +194,14 @@ def export_log(log, fmt: str, out: str | Path | None = None, layout: str = "wide
         _require("scipy.io", fmt)
     stem = Path(log_path) if log_path is not None else Path("log.mcap")
     meta = _meta_json(log)
+    names = json.dumps({n: v for n, v in _labels(log, columns).items()})
     if fmt in ("npz", "mat"):
         path = Path(out) if out else stem.with_suffix(f".{fmt}")
         path.parent.mkdir(parents=True, exist_ok=True)
         groups = _groups(log)
         t = np.asarray(log.t, dtype=float)
         if fmt == "npz":
-            arrays: dict[str, Any] = {"meta_json": np.array(meta)}
+            arrays: dict[str, Any] = {"meta_json": np.array(meta), "columns_json": np.array(names)}
             if layout == "wide":
                 arrays["t"] = t
                 arrays.update({n: np.asarray(log.signals[n]) for n in groups["state_true"] + groups["control"]})
@@ -163,7 +213,7 @@ def export_log(log, fmt: str, out: str | Path | None = None, layout: str = "wide
                 np.savez_compressed(f, **arrays)
         else:
             sio = _require("scipy.io", fmt)
-            mdict: dict[str, Any] = {"meta_json": meta}
+            mdict: dict[str, Any] = {"meta_json": meta, "columns_json": names}
             if layout == "wide":
                 mdict["t"] = t
                 mdict.update({_mat_name(n): np.asarray(log.signals[n]) for n in groups["state_true"] + groups["control"]})
@@ -172,7 +222,7 @@ def export_log(log, fmt: str, out: str | Path | None = None, layout: str = "wide
                     mdict[table] = {"t": t, **{_mat_name(n): np.asarray(log.signals[n]) for n in names}}
             sio.savemat(str(path), mdict, do_compression=True, oned_as="column")
         return [path]
-    tabs = tables(log, layout)
+    tabs = tables(log, layout, columns)
     if layout == "wide":
         path = Path(out) if out else stem.with_suffix(f".{fmt}")
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -185,5 +235,5 @@ def export_log(log, fmt: str, out: str | Path | None = None, layout: str = "wide
         if fmt == "csv":
             _write_csv(cols, path)
         else:
-            _write_parquet(cols, path, meta)
+            _write_parquet(cols, path, meta, names)
     return list(targets)

@@ -174,8 +174,14 @@ def _status(scan: dict, truncated: bool, t_end: float | None) -> tuple[str, str,
     return "unknown", "no status record", {}
 
 
-def read_log(path: str | os.PathLike) -> LogData:
+def read_log(path: str | os.PathLike, as_dataframe: bool = False) -> LogData:
     """Read a log written by :class:`McapRecorder` (complete, or cut off by ``kill -9``).
+
+    ``as_dataframe=True``: the per-sample signals as a pandas DataFrame instead, indexed by the
+    sample time ``t`` [s], one column per signal component named by joint, axis and thruster
+    (``q_true[alpha_shoulder]``, ``thrust_force[bluerov2_t1]``, ``tip_true[z]``; ``x[i]`` where a
+    name is unknown), the metadata in ``df.attrs["meta"]`` (:func:`uvms_mj.io.export.to_dataframe`;
+    needs pandas, ``pip install 'uvms-mj[export]'``).
 
     Returns a :class:`LogData` with the sample times, the signals (the same names, order,
     shapes and dtypes as the run's :class:`RunResult`; only samples whose every per-sample
@@ -231,8 +237,12 @@ def read_log(path: str | os.PathLike) -> LogData:
         meta.setdefault(key, value)
     if "T" not in meta and len(t) > 1:
         meta["T"] = float(np.median(np.diff(t)))
-    return LogData(t=t, signals=signals, status=status, reason=reason, meta=meta,
-                   truncated=truncated, path=str(path))
+    log = LogData(t=t, signals=signals, status=status, reason=reason, meta=meta, truncated=truncated, path=str(path))
+    if as_dataframe:
+        from uvms_mj.io.export import to_dataframe
+
+        return to_dataframe(log)
+    return log
 
 
 def log_info(path: str | os.PathLike) -> dict:
