@@ -1,92 +1,111 @@
-"""A dm_control environment over the plant: end-tip tracking, plain or residual on ``rac_dob``.
+"""A dm_control environment over the plant, for any robot: end-tip tracking, plain or residual on
+the scenario's controller.
 
-``load()`` builds a :class:`dm_control.rl.control.Environment` (a ``dm_env.Environment``) whose
-physics is the SAME plant as everywhere else in uvms_mj (hydrodynamics included): the
-:class:`Physics` wraps ``plant.data``, which is in water (the model's plugins), and advances
-it with :meth:`uvms_mj.plant.plant.Plant.step` (``mj_step``, whatever the integrator), so an env step
-is bit for bit the plant's own stepping.
+``load()`` builds a :class:`dm_control.rl.control.Environment` (a ``dm_env.Environment``) from a
+scenario, through the same :func:`uvms_mj.scenario.schema.build` as ``uvms-mj run``: the paper's
+planar robot and every MJCF robot (the BlueROV2 Heavy + Alpha studies included) alike. Its
+:class:`~uvms_mj.rl.physics.Physics` wraps ``plant.data``, which is in water (the model's
+plugins), and advances it with :meth:`uvms_mj.plant.plant.Plant.step` (``mj_step``, whatever the
+integrator), so an env step is bit for bit the plant's own stepping.
 
 .. code-block:: python
 
     import numpy as np
-    from uvms_mj import env as uvms_env
+    from uvms_mj.rl import env as uvms_env
 
-    env = uvms_env.load(residual=True, time_limit=10.0, random=0)   # residual on rac_dob, 600 steps
+    env = uvms_env.load(residual=True, scenario="bluerov2_alpha_circle_current", time_limit=10.0, random=0)
     spec, rng = env.action_spec(), np.random.default_rng(0)
     ts, ret = env.reset(), 0.0
     while not ts.last():
-        ts = env.step(0.05 * rng.uniform(spec.minimum, spec.maximum))   # small random residual
+        ts = env.step(0.02 * rng.uniform(spec.minimum, spec.maximum))   # small random residual
         ret += ts.reward
     print(f"return {ret:.3f}, tip {ts.observation['tip']}, target {ts.observation['target']}")
+    print(env.task.action_names, env.task.observation_names)            # every component named
 
-Rates: physics at the plant's step (1/120 s), control at the controller period T (1/60 s):
-``n_sub_steps = T / dt = 2``, the action held over both physics steps (zero-order hold), as in
-:func:`uvms_mj.sim.loop.run_closed_loop`.
+Scenario: a :class:`~uvms_mj.scenario.schema.Scenario`, a scenario file or the name of a packaged
+scenario (``"paper"``, ``"bluerov2_alpha_station"``: resolved as the command line does, with
+``sets=["duration=5", ...]`` as ``--set``), a :class:`~uvms_mj.sim.experiment.PaperExperiment`, or
+None (the paper's experiment). A bad one raises :class:`~uvms_mj.scenario.schema.ScenarioError`
+(a ValueError) in one line per problem, naming the file and the field.
 
-Actions (``float64``, shape (5,), a ``BoundedArray``): (thrust1, thrust2, thrust3) [N along each
-thruster's axis] and (tau1, tau2) [N m].
+Rates: physics at the plant's step, control at the controller's period T (the paper's: 1/120 s
+and 1/60 s, ``n_sub_steps = 2``; the BlueROV2 studies': 0.004 s and 0.02 s), the action held over
+the physics steps (zero-order hold), as in :func:`uvms_mj.sim.loop.run_closed_loop`.
 
-* plain mode: the command itself. Thrust bounds are the model's ``actuator_ctrlrange``
-  (asymmetric, -8.849 / +15.978 N); the joint motors have no ``ctrlrange`` in the model (the
-  paper gives no torque limit), so we bound them at +-``torque_limit`` (default
-  :data:`DEFAULT_TORQUE_LIMIT` = 20 N m, six times the largest torque ``rac_dob`` uses in the
-  paper's experiment, 3.4 N m). Actions outside the bounds are clipped.
-* residual mode (``residual=True``): the action is ADDED to the command of the source's
-  controller (``rac_dob`` by default: thrust and torques), for residual-learning studies.
-  Residual bounds: thrust +-(max - min) of the ctrlrange (full authority: from any base command
-  the total can reach any thrust; MuJoCo clamps the total to the ctrlrange, as for the plain
-  controller), torques +-``torque_limit``; the total torque is not clipped (``rac_dob``'s own
-  torque is not bounded either). The controller sees only its measurements, exactly as in
-  ``run_closed_loop``: the measured positions q at each control sample (through the source's
-  sensor model: noise, quantization, delay), its own velocity differencing (or the velocity
-  sensor if configured), ``controller.reset(measurement)`` at k = 0. A zero residual reproduces
-  ``run_closed_loop`` bit for bit (tested).
+Actions (``float64``, a ``BoundedArray`` named ``"\t".join(task.action_names)``): one thrust per
+thruster [N along its axis], then one torque per joint motor [N m], in the model's order
+(:mod:`uvms_mj.rl.layout`; the paper's: (thrust1, thrust2, thrust3, tau1, tau2); the BlueROV2 +
+Alpha's: 8 thrusters, 4 joint motors).
+
+* plain mode: the command itself. Thrust bounds: the model's force range (the paper's
+  asymmetric -8.849 / +15.978 N, the T200's +-30.622 N). Torque bounds: the motor's ctrlrange
+  where the model gives one (the Alpha's +-9 N m, +-5 N m for the wrist), inside +-``torque_limit``
+  (default :data:`DEFAULT_TORQUE_LIMIT` = 20 N m: the paper's motors have no ``ctrlrange`` and the
+  paper gives no limit: six times the largest torque ``rac_dob`` uses in the paper's experiment,
+  3.4 N m). Actions outside the bounds are clipped.
+* residual mode (``residual=True``): the action is ADDED to the command of the scenario's
+  controller (``rac_dob`` in the paper's and the packaged 3-D studies), for residual-learning
+  studies. Residual bounds: thrust +-(max - min) of the force range (full authority: from any
+  base command the total can reach any thrust; the plant clamps the total to the range, as for
+  the plain controller), torques +- the larger magnitude of the plain bounds (the paper's +-20,
+  the Alpha's +-9 / +-5 N m); the total torque is clipped only by the model's ctrlrange where it
+  has one (``rac_dob``'s own torque is not bounded either). The controller sees only its
+  measurements, exactly as in ``run_closed_loop``: the measured positions at each control sample
+  (through the scenario's sensor model: noise, quantization, delay, per-signal sensors), its own
+  velocity differencing (or the velocity sensor if configured), ``controller.reset(measurement)``
+  at k = 0, the plant's scheduled events (payload pick-up, thruster failures) at each sample. A
+  zero residual reproduces ``run_closed_loop`` bit for bit (tested on the paper's robot and the
+  BlueROV2 + Alpha).
 
 The first action of an episode warm-starts the thrusters' first-order lag state at the first
-thrust command (clipped to the force range): the robot is holding station when the episode
-starts, as ``run_closed_loop(warm_start=True)`` does (the source's ``warm_start`` setting).
+thrust command (:meth:`uvms_mj.plant.plant.Plant.warm_start`): the robot is holding station when
+the episode starts, as ``run_closed_loop(warm_start=True)`` does (the source's ``warm_start``).
 
-Observations (``OrderedDict`` of ``float64`` arrays, world frame, SI units):
+Observations (``OrderedDict`` of ``float64`` arrays, SI units; each component named in
+``task.observation_names``, :func:`uvms_mj.rl.layout.observation_names`; ``flat_observation=True``
+concatenates them in this order, named by ``task.flat_observation_names``):
 
-=================== ===== =====================================================================
-key                 shape
-=================== ===== =====================================================================
-base_pose           (3,)  (p0x, p0y, phi0) [m, m, rad]
-joint_angles        (2,)  (phi1, phi2) [rad]
-base_velocity       (3,)  world-frame base velocity (p0x_dot, p0y_dot, phi0_dot)
-joint_velocities    (2,)  (phi1_dot, phi2_dot) [rad/s]
-tip                 (2,)  end-tip position [m]
-target              (2,)  desired end-tip position p_ed(t) on the path at this sample [m]
-goal                (2,)  end point of the path [m]
-time_to_go          (1,)  time left in the episode [s]
-thrust              (3,)  actual thrust of each thruster (the lag state, clamped) [N]
-base_command        (5,)  residual mode only: the controller's command (thrust [N], torques
-                          [N m]) for the coming step, to which the action is added
-=================== ===== =====================================================================
+=================== ======================================================================
+key                 contents (the paper's robot / a free vehicle such as the BlueROV2)
+=================== ======================================================================
+base_pose           the base's qpos: (x, y, yaw) [m, m, rad] (p0x, p0y, phi0) / (x, y, z, qw,
+                    qx, qy, qz) world position [m] and attitude quaternion
+joint_angles        arm joint angles [rad], by joint name (omitted for a vehicle without arm)
+base_velocity       the base's qvel: world (vx, vy, wz) / (vx, vy, vz) world and (wx, wy, wz)
+                    body frame
+joint_velocities    arm joint rates [rad/s] (omitted without arm)
+tip                 end-tip position, world [m]: (x, y) in the paper's plane / (x, y, z)
+target              desired end-tip position on the path at this sample [m] (no path: the tip
+                    where the episode started)
+goal                a straight path's end point; another path's position at the time limit [m]
+time_to_go          time left in the episode [s]
+thrust              actual thrust of each thruster (the lag state, clamped) [N]
+base_command        residual mode only: the controller's command (thrusts [N], torques [N m])
+                    for the coming step, to which the action is added
+=================== ======================================================================
+
+(``tip``, ``target`` and ``goal``: robots with a tip site only.)
 
 Reward (each step, at the state the step reached, t = k T)::
 
-    r = -(w_tip |p_tip - p_ed(t)| + w_base |p0 - p0_ref| + w_att |wrap(phi0 - phi0_ref)|)
+    r = -(w_tip |p_tip - p_ed(t)| + w_base |p0 - p0_ref| + w_att angle(R0_ref^T R0))
 
-with p_ed(t) the desired tip position (``target``), (p0_ref, phi0_ref) the base pose at the
-start of the episode (hold station), |.| Euclidean norms, and the weights of
+with p_ed(t) the desired tip position (``target``), (p0_ref, R0_ref) the base pose at the start
+of the episode (hold station; a planar base's angle error wrapped to [-pi, pi], a free vehicle's
+the rotation angle 2 acos |<q, q_ref>|), |.| Euclidean norms, and the weights of
 :class:`RewardWeights`: w_tip = 1 /m, w_base = 0.1 /m, w_att = 0.5 /rad. The base weight is
 small because the paper's path ends 0.17 m beyond the arm's reach: the base has to carry the arm
 (Eq. 12), and staying put would cost w_tip x 0.17 per step. A diverged plant (non-finite state,
-runaway speed, or a non-finite controller output) ends the episode with discount 0 and reward
-``-divergence_penalty`` (default 100); the last observation then has non-finite values zeroed.
+runaway speed, a non-finite controller output or one beyond 1e6 N / N m) ends the episode with
+discount 0 and reward ``-divergence_penalty`` (default 100); the last observation then has
+non-finite values zeroed.
 
-Episodes start from the paper's initial state (keyframe ``paper_initial``, at rest), last
-``time_limit`` seconds (default: the source's duration, 40 s): ``floor(time_limit / T)`` steps,
-the last one a ``LAST`` step with discount 1 (a time limit, not a failure). Everything is
-deterministic given ``random`` (a seed or a ``numpy.random.RandomState``): it seeds only the
-sensor noise of the residual controller (``Task.sensor_seed`` is each episode's seed for
-``np.random.default_rng``, the generator ``run_closed_loop(seed=...)`` uses).
-
-Plant, trajectory and controller come from a source: a :class:`~uvms_mj.scenario.schema.Scenario`
-(or the path of a scenario YAML file) or a :class:`~uvms_mj.sim.experiment.PaperExperiment`;
-default ``Scenario()``, the paper's experiment (truth plant differing from the controller's
-nominal model, straight 0.3 m tip path at 0.02 m/s, ``rac_dob``).
+Episodes start from the scenario's initial state (the paper's: keyframe ``paper_initial``, at
+rest; a payload picked up in the last episode is dropped first), last ``time_limit`` seconds
+(default: the scenario's duration): ``floor(time_limit / T)`` steps, the last one a ``LAST`` step
+with discount 1 (a time limit, not a failure). Everything is deterministic given ``random`` (a
+seed or a ``numpy.random.RandomState``): it seeds only the sensor noise of the residual controller
+(``Task.sensor_seed`` is each episode's seed, the ``seed`` of ``run_closed_loop``).
 """
 
 from __future__ import annotations
