@@ -375,7 +375,8 @@ class TrackingTask(control.Task):
         obs["thrust"] = physics.plant.thruster_forces if physics.owns_plant_data else np.zeros(self.n_thrusters)
         if self.controller is not None:
             cmd = self.command
-            obs["base_command"] = np.r_[cmd.thrust, cmd.torques] if cmd is not None else np.zeros(spec_size(self))
+            obs["base_command"] = (np.r_[cmd.thrust, cmd.torques] if cmd is not None
+                                   else np.zeros(self._action_spec.shape[0]))
         if len(obs) != len(self.observation_names):  # a robot without arm joints: no joint entries
             obs = collections.OrderedDict((k, obs[k]) for k in self.observation_names)
         if physics.divergence is not None:
@@ -409,11 +410,6 @@ class TrackingTask(control.Task):
 
     def get_termination(self, physics: Physics) -> float | None:
         return 0.0 if physics.divergence is not None else None
-
-
-def spec_size(task: TrackingTask) -> int:
-    """Number of components of the task's action."""
-    return int(task.action_spec(None).shape[0])
 
 
 # --------------------------------------------------------------------------- constructors
