@@ -160,3 +160,16 @@ def test_scenario_names_and_errors(tmp_path):
         uvms_env.load(scenario=3)
     with pytest.raises(ValueError, match="time_limit"):
         uvms_env.load(scenario=CIRCLE, time_limit=0.001)
+
+
+def test_flat_observation_names():
+    env = uvms_env.load(residual=True, scenario=CIRCLE, time_limit=0.1, flat_observation=True)
+    names = env.task.flat_observation_names
+    spec = env.observation_spec()["observations"]
+    assert spec.shape == (len(names),) == (7 + 4 + 6 + 4 + 3 * 3 + 1 + 8 + 12,)
+    assert names[:3] == ["base_pose.x", "base_pose.y", "base_pose.z"] and "joint_angles.alpha_elbow" in names
+    flat = env.reset().observation["observations"]
+    dict_env = uvms_env.load(residual=True, scenario=CIRCLE, time_limit=0.1)
+    obs = dict_env.reset().observation
+    np.testing.assert_array_equal(flat[names.index("tip.z")], obs["tip"][2])
+    np.testing.assert_array_equal(flat[names.index("base_command.alpha_wrist")], obs["base_command"][11])
