@@ -9,7 +9,8 @@ from pathlib import Path
 import click
 import numpy as np
 
-from uvms_mj.scenario.packaged import packaged_scenarios, resolve_scenario, scenarios_dir  # noqa: F401  (importable from here)
+# scenarios_dir, packaged_scenarios: importable from here as before
+from uvms_mj.scenario.packaged import packaged_scenarios, resolve_scenario, scenarios_dir  # noqa: F401
 
 EXIT_DIVERGED = 3
 EXIT_RENDER = 4

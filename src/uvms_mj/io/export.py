@@ -26,12 +26,12 @@ their logged shapes (no flattening): ``t`` and one array per signal (wide), or
 ``<channel>/<signal>`` keys (npz) and one struct per channel (mat), plus ``meta_json``, the
 log's metadata and status as JSON text, and ``columns_json``, each signal's component names
 (JSON: signal -> list of names, null where unknown; Parquet files carry it in their schema
-metadata as ``uvms_mj_columns``).
+metadata as ``uvms_mj_columns``). MATLAB names must be identifiers: ``e_p`` stays ``e_p``; any
+other character becomes ``_``.
 
 :func:`to_dataframe` (or ``read_log(path, as_dataframe=True)``) gives the wide table as a pandas
 DataFrame indexed by ``t`` [s], with the same column names, booleans as bool, and the log's
-metadata in ``df.attrs["meta"]`` (``status``, ``reason`` too); pandas is in the ``[export]`` extra. MATLAB names must be identifiers: ``e_p`` stays
-``e_p``; any other character becomes ``_``.
+metadata in ``df.attrs["meta"]`` (``status``, ``reason`` too); pandas is in the ``[export]`` extra.
 
 Parquet needs pyarrow, mat scipy, DataFrames pandas: ``pip install 'uvms-mj[export]'``.
 """
