@@ -80,7 +80,7 @@ def test_action_bounds_and_names_from_the_model():
     np.testing.assert_array_equal(res.action_spec().maximum[8:], [9.0, 9.0, 9.0, 5.0])
 
 
-@pytest.mark.parametrize("name", [CIRCLE, "bluerov2_alpha_station"])
+@pytest.mark.parametrize("name", [CIRCLE, "bluerov2_alpha_station", "bluerov2_alpha_waves"])
 def test_zero_residual_reproduces_the_cli_run(name):
     """The environment's plant and controller are those of `uvms-mj run` (scenario.build): a zero
     residual is run_closed_loop bit for bit (the same code on both sides: the controller object,

@@ -93,7 +93,7 @@ class Physics(dm_mujoco.Physics):
         self.divergence = None
         if self.owns_plant_data:
             self.drop_payload()
-            self._plant.reset(None)  # clears the plant's divergence record too
+            self._plant.reset()  # its initial state (not qpos0: a wave scenario checks the depth); clears its divergence
         super().reset(keyframe_id)
 
     def copy(self, share_model: bool = True) -> "Physics":
