@@ -178,12 +178,12 @@ def test_auto_gains_floating_and_paper():
         np.testing.assert_allclose(c.gamma, [base] * 6 + [0.2] * 3, rtol=0, atol=1e-12)
         np.testing.assert_allclose(c.lam, c.gamma, rtol=0, atol=0)
         assert c.resolved_params["gamma"] == list(c.gamma)
-        assert {"gamma", "lam"} <= set(c.resolved_params["auto"])
+        assert c.resolved_params["auto_gains"] == ["gamma", "lam"] and c.resolved_params["thruster_lag"] == 0.05
     c = RAC(robot=robot, T=0.02, gain_margin=1.0)  # the bare stability limit: 0.19 on the base
     assert c.gamma[0] == pytest.approx(0.19)
     np.testing.assert_allclose(RAC().gamma, [0.3, 0.3, 0.2, 0.2, 0.2], rtol=0, atol=0)
     given = RAC(robot=robot, T=0.02, gamma=0.3, lam=0.25)
-    assert given.gamma[0] == 0.3 and given.lam[8] == 0.25 and "gamma" not in given.resolved_params["auto"]
+    assert given.gamma[0] == 0.3 and given.lam[8] == 0.25 and "auto_gains" not in given.resolved_params
     with pytest.raises(ControllerError, match="gain_margin"):
         RAC(robot=robot, T=0.02, gain_margin=0.5)
     with pytest.raises(ControllerError, match="gamma"):

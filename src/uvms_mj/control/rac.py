@@ -258,8 +258,10 @@ class RAC(CompiledSamples, Controller):
                                                   js_high_ratio, dls_ratio)
         js, js_high, dls_threshold = (self.resolved_params[k] for k in ("js", "js_high", "dls_threshold"))
         self.resolved_params.update(gamma=[float(v) for v in self.gamma], lam=[float(v) for v in self.lam])
-        self.resolved_params["auto"] = (list(self.resolved_params.get("auto", []))
-                                        + [k for k, v in (("gamma", gamma), ("lam", lam)) if _is_auto(v)])
+        auto = [k for k, v in (("gamma", gamma), ("lam", lam)) if _is_auto(v)] if self.free else []
+        if auto:  # the margin rule's inputs (docs/paper-reading.md "Gains and delay")
+            self.resolved_params.update(auto_gains=auto, gain_margin=float(gain_margin),
+                                        thruster_lag=thruster_lag(m))
         check_rac_settings(self, js, js_high, n_ramp, dls_threshold, dls_damping, tf, observer_gain, observer_input)
         size = 7 if self.free else nb
         self.base_trajectory = check_base_trajectory(base_trajectory)
