@@ -97,7 +97,8 @@ def test_largest_stable_gain_bisection():
 def test_compensation_restores_the_undelayed_loop_without_lag():
     """Prediction over the delay is exact for the ZOH double integrator without lag: the
     delayed, compensated loop has the undelayed loop's eigenvalues (plus zeros of the stored
-    samples: a defective zero block, whose computed eigenvalues scatter to ~eps^(1/4), hence the 1e-2 cut). Tolerance: round-off."""
+    samples: a defective zero block, whose computed eigenvalues scatter to ~eps^(1/4), hence the
+    1e-2 cut). Tolerance: round-off."""
     for g in (0.2, 0.5):
         ref = np.linalg.eigvals(closed_loop_matrix(g, g, T_PAPER))
         ev = np.linalg.eigvals(closed_loop_matrix(g, g, T_PAPER, delay=1, compensation=1))

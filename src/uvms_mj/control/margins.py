@@ -42,8 +42,8 @@ import math
 import numpy as np
 from scipy.linalg import expm
 
-__all__ = ["DelayPredictor", "GAIN_MARGIN", "GAIN_STEP", "closed_loop_matrix", "spectral_radius", "largest_stable_gain", "thruster_lag",
-           "margin_gains"]
+__all__ = ["DelayPredictor", "GAIN_MARGIN", "GAIN_STEP", "auto_gains", "check_margin_settings", "closed_loop_matrix",
+           "largest_stable_gain", "spectral_radius", "thruster_lag"]
 
 #: Our margin factor: a robot's default gain (``gamma``/``lam`` = "auto" off the paper's robot) is the
 #: largest gain stable with a one-sample measurement delay (and the model's thruster lag) divided by it.
@@ -197,16 +197,31 @@ def thruster_lag(model) -> float:
     return max(taus)
 
 
-def margin_gains(T: float, tau: float, observer: bool = False, tf: float = 10.0, delay: int = 1,
-                 margin: float = GAIN_MARGIN) -> tuple[float, float]:
-    """Our default-gain rule: (base gain, arm-tip gain) = the largest gains stable with ``delay``
-    samples of measurement delay -- the base's rows through the thrusters' lag ``tau``, the tip's
-    without lag (arm motors) -- each divided by ``margin``; Gamma = Lambda."""
-    if not (math.isfinite(margin) and margin >= 1.0):
-        raise ValueError(f"margin = {margin!r} must be >= 1")
-    base = largest_stable_gain(T, delay, tau, observer, tf) / margin
-    tip = largest_stable_gain(T, delay, 0.0, observer, tf) / margin
-    return base, tip
+def check_margin_settings(gain_margin, delay_compensation) -> None:
+    """RAC's ``gain_margin`` (a number >= 1) and ``delay_compensation`` (a whole number >= 0).
+
+    Raises:
+        ControllerError: naming the parameter, its value and what is allowed."""
+    from uvms_mj.control.base import ControllerError
+
+    if not (isinstance(gain_margin, (int, float)) and not isinstance(gain_margin, bool)
+            and math.isfinite(gain_margin) and gain_margin >= 1.0):
+        raise ControllerError(f"gain_margin = {gain_margin!r} must be a number >= 1")
+    if not (isinstance(delay_compensation, (int, np.integer)) and not isinstance(delay_compensation, bool)
+            and delay_compensation >= 0):
+        raise ControllerError(f"delay_compensation = {delay_compensation!r} must be a whole number of samples >= 0")
+
+
+def auto_gains(paper: np.ndarray, n_base: int, T: float, tau: float, observer: bool = False, tf: float = 10.0,
+               margin: float = GAIN_MARGIN) -> np.ndarray:
+    """Our default-gain rule ("auto" gains of ``rac``/``rac_dob`` on a floating robot): per task
+    row min(the paper's block gain ``paper``, the largest gain stable with a one-sample
+    measurement delay / ``margin``, rounded down to GAIN_STEP); the first ``n_base`` rows (the
+    vehicle's) through the thrusters' lag ``tau`` [s], the others (the tip's, arm motors) without."""
+    base = largest_stable_gain(T, 1, tau, observer, tf) / margin
+    tip = largest_stable_gain(T, 1, 0.0, observer, tf) / margin
+    bound = np.floor(np.where(np.arange(paper.size) < n_base, base, tip) / GAIN_STEP) * GAIN_STEP
+    return np.minimum(paper, bound)
 
 
 class DelayPredictor:
@@ -269,6 +284,21 @@ class DelayPredictor:
             mujoco.mj_integratePos(m, qh, v + 0.5 * T * a, T)
             v = v + T * a
         return qh, (v if qd is not None else None)
+
+    def command(self, ctrl, m):
+        """One sample of ``ctrl`` (a RAC) on the measurement ``m`` predicted over the delay; the
+        sample's nominal acceleration is recorded for the next predictions."""
+        from uvms_mj.control.base import Measurement
+
+        q, qd = self.predict(m.q, m.qd)
+        self.active = True
+        try:
+            cmd = ctrl.compute(Measurement(k=m.k, t=m.t, q=q, qd=qd))
+        finally:
+            self.active = False
+        sig = cmd.signals
+        self.record(sig["qdd_desired"], sig["u_B"], sig["u_B_applied"], lambda: ctrl.robot.mass_matrix(q))
+        return cmd
 
     def record(self, qdd, u_B=None, u_applied=None, mass=None) -> None:
         """The nominal acceleration a(k) of the sample just computed: its commanded q_ddot_d,

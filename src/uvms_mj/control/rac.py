@@ -48,7 +48,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
-from uvms_mj.control.margins import GAIN_MARGIN, GAIN_STEP, DelayPredictor, largest_stable_gain, thruster_lag
+from uvms_mj.control.margins import GAIN_MARGIN, DelayPredictor, auto_gains, check_margin_settings, thruster_lag
 from uvms_mj.control.manipulability import DLS_RATIO, PAPER_JS_RATIO, manipulability, resolve_thresholds, small_inv
 from uvms_mj.control.nominal import NominalRobot
 from uvms_mj.control.rac_compiled import CompiledSamples
@@ -239,15 +239,11 @@ class RAC(CompiledSamples, Controller):
         default = np.concatenate(blocks)
         self.ntask = default.size
         self.nbt = 6 if self.free else nb  # base rows of the task
-        if not (isinstance(gain_margin, (int, float)) and math.isfinite(gain_margin) and gain_margin >= 1.0):
-            raise ControllerError(f"gain_margin = {gain_margin!r} must be a number >= 1")
+        check_margin_settings(gain_margin, delay_compensation)
         if self.free and (_is_auto(gamma) or _is_auto(lam)):
-            default = self._margin_gains(default, float(gain_margin), tf)
+            default = auto_gains(default, 6, self.T, thruster_lag(m), self.observer, tf, float(gain_margin))
         self.gamma = _gains("gamma", gamma, default)
         self.lam = _gains("lambda", lam, default)
-        if not (isinstance(delay_compensation, (int, np.integer)) and not isinstance(delay_compensation, bool)
-                and delay_compensation >= 0):
-            raise ControllerError(f"delay_compensation = {delay_compensation!r} must be a whole number of samples >= 0")
         self.delay_compensation = int(delay_compensation)
         self._predictor = (DelayPredictor(m, self.T, self.delay_compensation, self.base_dofs, thruster_lag(m))
                            if self.delay_compensation else None)
@@ -310,16 +306,6 @@ class RAC(CompiledSamples, Controller):
         self.B_pinv = np.linalg.pinv(Bc)
         self.allocator = (Allocator(B, self.lo, self.hi, dofs=self.wrench_rows)
                           if allocation == "wls" and B.shape[1] else None)
-
-    def _margin_gains(self, paper: np.ndarray, margin: float, tf: float) -> np.ndarray:
-        """The "auto" gains of a floating base: per entry min(the paper's block gain, the largest
-        gain stable with a one-sample delay / margin), the base rows (0-5) through the nominal
-        model's thruster lag, the tip rows without (:mod:`uvms_mj.control.margins`)."""
-        tau = thruster_lag(self.robot.model)
-        base = largest_stable_gain(self.T, 1, tau, self.observer, tf) / margin
-        tip = largest_stable_gain(self.T, 1, 0.0, self.observer, tf) / margin
-        bound = np.floor(np.where(np.arange(paper.size) < 6, base, tip) / GAIN_STEP) * GAIN_STEP
-        return np.minimum(paper, bound)
 
     # ---------------------------------------------------------------- task space
 
@@ -478,22 +464,9 @@ class RAC(CompiledSamples, Controller):
         mujoco.mj_differentiatePos(self.robot.model, qd, self.T, self._q_prev, q)
         return qd
 
-    def _compute_predicted(self, m: Measurement) -> Command:
-        """A sample on the measurement predicted over the delay (``delay_compensation``)."""
-        p = self._predictor
-        q, qd = p.predict(m.q, m.qd)
-        p.active = True
-        try:
-            cmd = self.compute(Measurement(k=m.k, t=m.t, q=q, qd=qd))
-        finally:
-            p.active = False
-        sig = cmd.signals
-        p.record(sig["qdd_desired"], sig["u_B"], sig["u_B_applied"], lambda: self.robot.mass_matrix(q))
-        return cmd
-
     def compute(self, m: Measurement) -> Command:
-        if self._predictor is not None and not self._predictor.active:
-            return self._compute_predicted(m)
+        if self._predictor is not None and not self._predictor.active:  # delay_compensation (ours)
+            return self._predictor.command(self, m)
         if self._ws is not None:
             return self._compute_kernel(m)
         T, k, r = self.T, m.k, self.robot
