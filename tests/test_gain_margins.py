@@ -266,3 +266,14 @@ def test_compensation_kernel_and_python_agree():
     for k in ("thrust_command", "torques", "e_p", "q_true"):
         y = b.signals[k]
         np.testing.assert_allclose(a.signals[k], y, rtol=0, atol=1e-9 * float(np.max(np.abs(y))) + 1e-10, err_msg=k)
+
+
+def test_resolved_scenario_shows_auto_or_the_papers_gains():
+    """`validate --resolved` (schema.resolved): "auto" on bluerov2_alpha (the numbers are the
+    controller's resolved_params, in a log's meta), the paper's gains on the paper's robot."""
+    from uvms_mj.scenario.schema import load_scenario, resolved
+
+    d = resolved(load_scenario("scenarios/bluerov2_alpha_circle_current.yaml"))["controller"]["params"]
+    assert d["gamma"] == d["lam"] == "auto" and d["gain_margin"] == GAIN_MARGIN and d["delay_compensation"] == 0
+    p = resolved(load_scenario("scenarios/paper.yaml"))["controller"]["params"]
+    assert p["gamma"] == p["lam"] == [0.3, 0.3, 0.2, 0.2, 0.2]
