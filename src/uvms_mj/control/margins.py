@@ -10,7 +10,8 @@ normalised to 1 (u is an acceleration [m/s^2 or rad/s^2]):
 * measurement: y(k) = x(k - d), d samples of delay (``sensors.delay``);
 * optional prediction over the delay (``delay_compensation`` = c samples, :class:`DelayPredictor`):
   v_hat = (y(k) - y(k-1)) / T + T/2 u(k-c-1), then c steps x_hat += T v_hat + T^2/2 u(j),
-  v_hat += T u(j) for j = k-c .. k-1 (exact for the ZOH double integrator without lag);
+  v_hat += T u(j) for j = k-c .. k-1 (exact for the ZOH double integrator without lag; the
+  controller's :class:`DelayPredictor` also corrects for the lag, this model does not);
 * controller (regulation, p_d = 0), with y_hat the (predicted) measurement:
   s(k) = (y_hat(k) - y_hat(k-1)) / T                                (backward difference)
   v_d(k) = -gamma y_hat(k-1) / T,  v_d(k+1) = -gamma y_hat(k) / T   (Eq. 11)
