@@ -48,6 +48,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from uvms_mj.control.margins import GAIN_MARGIN, DelayPredictor, auto_gains, check_margin_settings, thruster_lag
 from uvms_mj.control.manipulability import DLS_RATIO, PAPER_JS_RATIO, manipulability, resolve_thresholds, small_inv
 from uvms_mj.control.nominal import NominalRobot
 from uvms_mj.control.rac_compiled import CompiledSamples
@@ -72,9 +73,15 @@ TIP_BLOCK = 600
 GAIN_BASE_POSITION, GAIN_BASE_ROTATION, GAIN_TIP = 0.3, 0.2, 0.2
 
 
+def _is_auto(value: Any) -> bool:
+    return value is None or (isinstance(value, str) and value == "auto")
+
+
 def _gains(name: str, value: Any, default: np.ndarray) -> np.ndarray:
-    if value is None:
+    if _is_auto(value):
         return default.copy()
+    if isinstance(value, str):
+        raise ControllerError(f"{name} = {value!r}: allowed: \"auto\", 1 or {default.size} numbers in (0, 1)")
     arr = np.atleast_1d(np.asarray(value, dtype=float))
     if arr.size == 1:
         arr = np.full(default.size, float(arr[0]))
@@ -108,8 +115,21 @@ class RAC(CompiledSamples, Controller):
         robot: the controller's :class:`NominalRobot` (given by the scenario; default the paper's
             robot's model file, :func:`paper_nominal_robot`).
         T: sampling period [s] (paper 1/60).
-        gamma, lam: Gamma, Lambda (1 or task-size numbers in (0, 1); default 0.3 base position,
-            0.2 base rotation and tip: the paper's on its robot).
+        gamma, lam: Gamma, Lambda (1 or task-size numbers in (0, 1)) or "auto" (default): on a
+            planar base (the paper's robot) the paper's 0.3 base position, 0.2 base rotation and
+            tip; on a floating base our margin rule, per block: min(the paper's block gain, the
+            largest gain stable with a one-sample measurement delay / ``gain_margin``, rounded down
+            to 0.005), the base
+            blocks through the model's thruster lag, the tip without
+            (:func:`uvms_mj.control.margins.largest_stable_gain`; docs/paper-reading.md "Gains and
+            delay"). Resolved numbers: ``resolved_params``.
+        gain_margin: the margin factor of "auto" gains (ours, default
+            :data:`uvms_mj.control.margins.GAIN_MARGIN` = 1.5).
+        delay_compensation: samples d of a known measurement delay to predict over with the
+            nominal model (ours, off by default: 0; :class:`uvms_mj.control.margins.DelayPredictor`):
+            the measurement is advanced d samples by the commanded accelerations of the previous
+            samples before the per-sample algebra. It does not predict the thrusters' lag, the
+            observer's estimate or a disturbance.
         js, js_high: Eq. 12 thresholds on the manipulability w: "auto" (js's default) = js_ratio
             (js_high_ratio, default js_ratio) x the arm's largest w over its joint ranges -- 0.72,
             the paper's 0.045 on its arm (:mod:`uvms_mj.control.manipulability`) -- or a number
@@ -162,8 +182,8 @@ class RAC(CompiledSamples, Controller):
         trajectory=None,
         robot: NominalRobot | None = None,
         T: float = PAPER_T,
-        gamma=None,
-        lam=None,
+        gamma="auto",
+        lam="auto",
         js: float | str = "auto",
         js_high: float | str | None = None,
         n_ramp: int = 30,
@@ -186,6 +206,8 @@ class RAC(CompiledSamples, Controller):
         js_high_ratio: float | None = None,
         dls_ratio: float = DLS_RATIO,
         carry: str = "auto",
+        gain_margin: float = GAIN_MARGIN,
+        delay_compensation: int = 0,
     ) -> None:
         if robot is None:
             robot = paper_nominal_robot()
@@ -225,14 +247,25 @@ class RAC(CompiledSamples, Controller):
         default = np.concatenate(blocks)
         self.ntask = default.size
         self.nbt = 6 if self.free else nb  # base rows of the task
+        check_margin_settings(gain_margin, delay_compensation)
+        if self.free and (_is_auto(gamma) or _is_auto(lam)):
+            default = auto_gains(default, 6, self.T, thruster_lag(m), self.observer, tf, float(gain_margin))
         self.gamma = _gains("gamma", gamma, default)
         self.lam = _gains("lambda", lam, default)
+        self.delay_compensation = int(delay_compensation)
+        self._predictor = (DelayPredictor(m, self.T, self.delay_compensation, self.base_dofs, thruster_lag(m))
+                           if self.delay_compensation else None)
         # B's rows of [jacp; jacr]: the tip rows of the task
         rows = self.tip_rows if not self.free else np.arange(6 if self.tip_orientation else 3)
         #: The thresholds as numbers ("auto" resolved; what a run records: sim.loop's meta["controller_params"]).
         self.resolved_params = resolve_thresholds(robot, self.arm_dofs, rows, js, js_high, dls_threshold, js_ratio,
                                                   js_high_ratio, dls_ratio)
         js, js_high, dls_threshold = (self.resolved_params[k] for k in ("js", "js_high", "dls_threshold"))
+        self.resolved_params.update(gamma=[float(v) for v in self.gamma], lam=[float(v) for v in self.lam])
+        auto = [k for k, v in (("gamma", gamma), ("lam", lam)) if _is_auto(v)] if self.free else []
+        if auto:  # the margin rule's inputs (docs/paper-reading.md "Gains and delay")
+            self.resolved_params.update(auto_gains=auto, gain_margin=float(gain_margin),
+                                        thruster_lag=thruster_lag(m))
         check_rac_settings(self, js, js_high, n_ramp, dls_threshold, dls_damping, tf, observer_gain, observer_input)
         if carry not in ("auto",) + CARRY_MODES:
             raise ControllerError(f"carry = {carry!r}; allowed: auto, {', '.join(CARRY_MODES)}")
@@ -442,6 +475,8 @@ class RAC(CompiledSamples, Controller):
         self.filter.reset(self.g * M[np.ix_(b, b)] @ qd0[b])  # f_E_hat(0) = 0
         self.filter_arm.reset(self.g_arm * M[np.ix_(a, a)] @ qd0[a])
         self._ws = self._kernel_workspace() if self.use_kernel else None
+        if self._predictor is not None:
+            self._predictor.reset(q)
 
     def _velocity(self, q: np.ndarray) -> np.ndarray:
         """Backward difference of the measured coordinates as qvel (quaternions included)."""
@@ -450,6 +485,8 @@ class RAC(CompiledSamples, Controller):
         return qd
 
     def compute(self, m: Measurement) -> Command:
+        if self._predictor is not None and not self._predictor.active:  # delay_compensation (ours)
+            return self._predictor.command(self, m)
         if self._ws is not None:
             return self._compute_kernel(m)
         T, k, r = self.T, m.k, self.robot

@@ -493,17 +493,19 @@ def scenario_warnings(scenario: Scenario) -> list[str]:
     if scenario.arm.waypoints and not getattr(_factory(c.name), "uses_arm_waypoints", True):
         out.append(f"arm.waypoints: controller {c.name!r} moves the arm by the tip task, not by joint waypoints "
                    "(they apply to joint-space controllers such as station_pid and task_priority)")
-    if s.delay and c.name in ("rac", "rac_dob"):
+    if s.delay and c.name in ("rac", "rac_dob") and int(c.params.get("delay_compensation", 0) or 0) < s.delay:
         named, _ = _controller_signature(c.name)
-        robot_defaults = getattr(_factory(c.name), "PAPER_DEFAULTS", {})
-        gains = {k: c.params.get(k, robot_defaults.get(k, named[k].default if k in named else 0.0))
+        robot_defaults = getattr(_factory(c.name), "PAPER_DEFAULTS", {}) if scenario.robot == "paper" else {}
+        gains = {k: c.params.get(k, robot_defaults.get(k, named[k].default if k in named else "auto"))
                  for k in ("gamma", "lam")}
-        g = max(float(np.max(np.asarray(v, dtype=float))) for v in gains.values())
+        given = [v for v in gains.values() if not (v is None or isinstance(v, str))]  # "auto": has its margin
+        g = max((float(np.max(np.asarray(v, dtype=float))) for v in given), default=0.0)
         if g > DELAY_GAIN_MARGIN:
-            out.append(f"sensors.delay = 1 with controller {c.name!r} and gains up to {g:g} (gamma, lam): "
+            out.append(f"sensors.delay = {s.delay} with controller {c.name!r} and gains up to {g:g} (gamma, lam): "
                        "known to diverge within a few seconds; with one sample of delay the loop stays stable "
                        f"only for gains up to about {DELAY_GAIN_MARGIN:g} (measured on the paper scenario: 0.15 "
-                       "holds, 0.2 diverges at 2.8 s, the paper's 0.3 at 0.9 s)")
+                       "holds, 0.2 diverges at 2.8 s, the paper's 0.3 at 0.9 s; docs/paper-reading.md \"Gains and "
+                       "delay\"); \"auto\" gains or delay_compensation avoid it")
     return out
 
 
