@@ -104,6 +104,7 @@ from typing import Any, Sequence
 import mujoco
 import numpy as np
 
+from uvms_mj.control.limits import JOINT_LIMIT_MARGIN, JointLimits
 from uvms_mj.control.nominal import JointTrajectory, NominalRobot
 from uvms_mj.physics.thrusters import Allocator
 from uvms_mj.control.base import Command, Controller, ControllerError, Measurement, check_positive, register
@@ -276,6 +277,11 @@ class TaskPriority(Controller):
             feed-forward p_dot_v,d(t); the attitude stays the station's.
         station_attitude: the default station's attitude: "level" (default: roll = pitch = 0 at
             the measured yaw) | "measured" (:mod:`uvms_mj.control.station`).
+        joint_limits, joint_limit_margin: (ours; default true, 2 deg) keep the integrated
+            reference q_r of the arm joints inside the nominal ranges minus the margin
+            (:mod:`uvms_mj.control.limits`): the arm rows of zeta_r are clipped so that
+            q_r + T zeta_r stays inside, and q_r itself is clamped (after the anti-windup pull-back).
+            The posture reference (arm waypoints) is clamped too.
     """
 
     robots = "floating"
@@ -288,7 +294,8 @@ class TaskPriority(Controller):
                  bandwidth_base: float = 2.0, bandwidth_attitude: float = 3.0, bandwidth_joints: float = 10.0,
                  damping_ratio: float = 1.0, kp=None, kd=None, reference_lead_limit: float = 1.0,
                  feedforward: bool = True, base_reference=None, base_trajectory=None,
-                 station_attitude: str | None = None) -> None:
+                 station_attitude: str | None = None, joint_limits: bool = True,
+                 joint_limit_margin: float = JOINT_LIMIT_MARGIN) -> None:
         if not isinstance(robot, NominalRobot):
             raise ControllerError("task_priority needs robot= a NominalRobot (a floating robot scenario)")
         self.base_reference = check_base_reference(base_reference)
@@ -339,6 +346,8 @@ class TaskPriority(Controller):
         self.allocator = Allocator(B, robot.thruster_lo, robot.thruster_hi) if B.shape[1] else None
         self.d = int(lay.base_dadr)
         self.joint_dofs = np.asarray(lay.joint_dadr, dtype=int)
+        #: The arm joints' bounds on the nominal model (:mod:`uvms_mj.control.limits`).
+        self.limits = JointLimits(robot.model, lay.joint_qadr, self.T, joint_limits, joint_limit_margin)
 
     # ------------------------------------------------------------------ pieces
 
@@ -390,7 +399,7 @@ class TaskPriority(Controller):
         if self.arm is None:
             return self.q_joint0.copy(), np.zeros(self.nj)
         qd, qdd = self.arm(t)
-        return np.asarray(qd, dtype=float), np.asarray(qdd, dtype=float)
+        return self.limits.clamp_position(np.asarray(qd, dtype=float)), np.asarray(qdd, dtype=float)
 
     # ------------------------------------------------------------------ interface
 
@@ -443,6 +452,16 @@ class TaskPriority(Controller):
             qr = q.copy()
             mujoco.mj_integratePos(model, qr, lead, 1.0)
             self.q_ref = qr
+        ja, jd = self.robot.layout.joint_qadr, self.joint_dofs
+        if self.limits.active:  # ours: q_r of the arm joints inside the nominal ranges (minus the margin)
+            qr_arm = self.limits.clamp_position(self.q_ref[ja])
+            if np.any(qr_arm != self.q_ref[ja]):
+                self.q_ref[ja] = qr_arm
+                lead = np.zeros(model.nv)
+                mujoco.mj_differentiatePos(model, lead, 1.0, q, self.q_ref)
+                lead = np.clip(lead, -lim, lim)
+            zeta_r = zeta_r.copy()
+            zeta_r[jd] = self.limits.clamp_rate(self.q_ref[ja], zeta_r[jd])
         u = self.kp * lead + self.kd * (zeta_r - zeta) + h
         # q_r(k+1) = q_r(k) (+) T zeta_r(k)
         mujoco.mj_integratePos(model, self.q_ref, zeta_r, T)
