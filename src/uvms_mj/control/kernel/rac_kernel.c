@@ -12,7 +12,8 @@
 //   (Python)           Eq. 12 (SingularHandler: the base's desired velocity) and the desired tip
 //                      at k + 1;
 //   uvms_rac_command   the desired point p_d(k+1) (base reference + Eq. 12 offset, tip; p_d(k) is
-//                      the last sample's), Eqs. 10-11, Eq. 9 (block solution), Eqs. 13 and 15, the base force as a
+//                      the last sample's), Eqs. 10-11, Eq. 9 (block solution), the arm's joint-limit
+//                      clamp (ours: limits.clamp_joint_acceleration), Eqs. 13 and 15, the base force as a
 //                      body wrench, the "clip" allocation or the "wls" Allocator's fast path
 //                      (returns 1 when that does not apply: Python's Allocator gives the thrusts);
 //   uvms_rac_finish    the achieved base force, the observers' updates (Eq. 14 corrected,
