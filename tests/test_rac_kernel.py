@@ -41,7 +41,9 @@ def _run(name: str, sets: list[str], use_kernel: bool):
 
 
 def _assert_same_runs(a, b, rel=1e-9, rel_metrics=1e-8, flag_mismatch=0.0):
-    assert a.status == b.status == "ok"
+    # "joint_limit": finished, a joint more than 1 deg past the plant's range (the payload study's
+    # elbow, driven onto its stop by the weight no nominal model knows): a whole run all the same
+    assert a.status == b.status and a.status in ("ok", "joint_limit"), (a.reason, b.reason)
     assert list(a.signals) == list(b.signals)
     for k, y in b.signals.items():
         x = a.signals[k]
@@ -94,7 +96,9 @@ def test_wls_saturation_falls_back_to_the_allocator():
     a = _run("bluerov2_alpha_circle_current", sets, True)
     assert a.signals["thrust_saturated"].any()
     _assert_same_runs(a, _run("bluerov2_alpha_circle_current", sets, False), rel=1e-3, rel_metrics=1e-3,
-                      flag_mismatch=0.01)  # a thruster exactly at its limit in one run, a hair inside in the other
+                      flag_mismatch=0.02)  # a thruster exactly at its limit in one run, a hair inside in the other
+    # (measured 1.3 % of the flags since the arm's wrist runs into its joint-limit damper here: the
+    # clamp is another kink; the thrusts themselves agree to 1e-5 relative)
 
 
 @pytest.fixture

@@ -16,6 +16,8 @@ EXIT_DIVERGED = 3
 EXIT_RENDER = 4
 EXIT_IO = 5
 EXIT_INTERRUPTED = 130
+#: A run that finished but took a joint past its range by more than 1 deg (status "joint_limit").
+EXIT_JOINT_LIMIT = 6
 
 METRIC_LABELS = {
     "base_pos_rms_mm": "base position RMS [mm]",
@@ -28,6 +30,7 @@ METRIC_LABELS = {
     "torque_rms_Nm": "joint torque RMS [N m]",
     "saturated_s": "thrusters saturated [s]",
     "joint_rms_mrad": "arm joints RMS [mrad]",
+    "joint_limit_excursion_deg": "joint limit excursion [deg]",
 }
 #: Rows shown only when some run has a value (floating-robot metrics).
 _OPTIONAL_ROWS = ("joint_rms_mrad",)
@@ -50,6 +53,15 @@ def metrics_table(results: dict[str, dict[str, float]], status: dict[str, str] |
             line += f"{(vals[1] / vals[0]) if vals[0] else float('nan'):>9.2f}"
         lines.append(line)
     return "\n".join(lines)
+
+
+def exit_code(statuses) -> int:
+    """The exit code of finished runs: EXIT_DIVERGED if one diverged, else EXIT_JOINT_LIMIT if a
+    joint left its range (status "joint_limit"), else 0."""
+    statuses = list(statuses)
+    if any(s not in ("ok", "joint_limit") for s in statuses):
+        return EXIT_DIVERGED
+    return EXIT_JOINT_LIMIT if "joint_limit" in statuses else 0
 
 
 def _interrupted() -> None:

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import click
 
-from uvms_mj.cli.common import (EXIT_DIVERGED, EXIT_INTERRUPTED, EXIT_RENDER, SCENARIO, _JSON_HELP, _check_dir,
+from uvms_mj.cli.common import (EXIT_JOINT_LIMIT, EXIT_INTERRUPTED, EXIT_RENDER, SCENARIO, _JSON_HELP, _check_dir,
                                 _check_out, _io_error, _json_dest, _json_metrics, _load, _progress, _read, _warn,
-                                _write_json, metrics_table, packaged_scenarios, scenarios_dir)
+                                _write_json, exit_code, metrics_table, packaged_scenarios, scenarios_dir)
 from uvms_mj.plant.params import ParameterError
 
 
@@ -139,8 +139,8 @@ def run_cmd(scenario: str, sets: tuple[str, ...], out: str | None, video: bool |
     if video if video is not None else sc.outputs.video:
         _video(log, log.with_suffix(".mp4"), sc, echo=echo)
     if res.status != "ok":
-        click.echo(f"error: {res.reason}", err=True)
-        sys.exit(EXIT_DIVERGED)
+        click.echo(f"{'error' if res.status != 'joint_limit' else 'warning'}: {res.reason}", err=True)
+        sys.exit(exit_code([res.status]))
 
 
 @click.command()
@@ -194,8 +194,9 @@ def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str
     except (ValueError, KeyError, IndexError, TypeError) as exc:
         click.echo(f"warning: no comparison figure: {exc}", err=True)
     if failed:
-        click.echo("error: " + "; ".join(failed), err=True)
-        sys.exit(EXIT_DIVERGED)
+        code = exit_code(status.values())
+        click.echo(("error: " if code != EXIT_JOINT_LIMIT else "warning: ") + "; ".join(failed), err=True)
+        sys.exit(code)
 
 
 @click.command()

@@ -30,6 +30,7 @@ from uvms_mj.plant.layout import Layout
 from uvms_mj.plant.robot import compile_robot_spec
 from uvms_mj.physics.thrusters import allocation_matrix
 from uvms_mj.control.trajectories import min_jerk
+from uvms_mj.plant.layout import motor_torque_range
 
 
 class NominalRobot:
@@ -66,8 +67,9 @@ class NominalRobot:
         m, lay = self.model, self.layout
         self.thruster_lo, self.thruster_hi = (m.actuator_forcerange[lay.thruster_ids].T.copy() if len(lay.thruster_ids)
                                               else (np.zeros(0), np.zeros(0)))
-        self.motor_lo, self.motor_hi = (m.actuator_ctrlrange[lay.motor_ids].T.copy() if len(lay.motor_ids)
-                                        else (np.zeros(0), np.zeros(0)))
+        #: The joint torque [N m] each motor can give (:func:`uvms_mj.plant.layout.motor_torque_range`:
+        #: the control and force ranges where limited, times the gear; +-inf where not, the paper's).
+        self.motor_lo, self.motor_hi = motor_torque_range(m, lay.motor_ids)
         self.motor_dofs = np.array([m.jnt_dofadr[mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_JOINT, j)]
                                     for j in lay.motor_joints], dtype=int)
 

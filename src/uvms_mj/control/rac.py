@@ -49,6 +49,7 @@ import mujoco
 import numpy as np
 
 from uvms_mj.control.margins import GAIN_MARGIN, DelayPredictor, auto_gains, check_margin_settings, thruster_lag
+from uvms_mj.control.limits import JOINT_LIMIT_MARGIN, JOINT_LIMIT_TIME, JointLimits
 from uvms_mj.control.manipulability import DLS_RATIO, PAPER_JS_RATIO, manipulability, resolve_thresholds, small_inv
 from uvms_mj.control.nominal import NominalRobot
 from uvms_mj.control.rac_compiled import CompiledSamples
@@ -163,6 +164,13 @@ class RAC(CompiledSamples, Controller):
             (Eq. 14 corrected, Fig. 3(b)) on the arm's rows, with filter time constant tf_arm
             (default tf): f_M_hat = F(s)(u_M - f_tM + g M_MM phi_dot) - g M_MM phi_dot,
             f_tM = M_MB x0_ddot_d + h_M, the torques clipped to the motors' ranges.
+        joint_limits, joint_limit_margin, joint_limit_time: (ours) keep the arm joints inside
+            their nominal ranges minus the margin (default true, 2 deg, 0.1 s): each arm joint's
+            desired acceleration q_ddot_d is clamped by the discrete velocity damper of
+            :mod:`uvms_mj.control.limits` (after Eq. 9, before Eqs. 13 and 15, so the base's
+            inputs see the clamped arm motion); inert for unlimited joints (the paper's).
+            The joint torques are always clipped to the motors' ranges (``robot.motor_lo`` /
+            ``motor_hi``; unlimited on the paper's robot).
     """
 
     observer = False
@@ -208,6 +216,9 @@ class RAC(CompiledSamples, Controller):
         carry: str = "auto",
         gain_margin: float = GAIN_MARGIN,
         delay_compensation: int = 0,
+        joint_limits: bool = True,
+        joint_limit_margin: float = JOINT_LIMIT_MARGIN,
+        joint_limit_time: float = JOINT_LIMIT_TIME,
     ) -> None:
         if robot is None:
             robot = paper_nominal_robot()
@@ -228,6 +239,9 @@ class RAC(CompiledSamples, Controller):
         self.base_dofs = np.asarray(lay.base_dofs, dtype=int)
         self.arm_dofs = np.array([d for d in range(m.nv) if d not in set(self.base_dofs)], dtype=int)
         nb = self.base_dofs.size
+        self.arm_qadr = np.array([int(m.jnt_qposadr[m.dof_jntid[d]]) for d in self.arm_dofs], dtype=int)
+        #: The arm's joint-limit handling on the nominal model (:mod:`uvms_mj.control.limits`).
+        self.limits = JointLimits(m, self.arm_qadr, self.T, joint_limits, joint_limit_margin, joint_limit_time)
         if self.free:
             self.tip_rows = np.arange(3)
             self.lin = np.arange(3)  # base position coordinates inside the base block
@@ -451,7 +465,6 @@ class RAC(CompiledSamples, Controller):
             self._ref_R = quat_to_mat(level_quaternion(ref[3:7]) if level else ref[3:7])
         else:
             self._ref_pos = (q[self.base_qpos] if self.base_reference is None else self.base_reference).astype(float).copy()
-        self.arm_qadr = np.array([int(r.model.jnt_qposadr[r.model.dof_jntid[d]]) for d in self.arm_dofs], dtype=int)
         self.q_rest = q[self.arm_qadr].copy()
         b, a = self.base_dofs, self.arm_dofs
         self._ix = {"bb": np.ix_(b, b), "ba": np.ix_(b, a), "ab": np.ix_(a, b), "aa": np.ix_(a, a)}
@@ -552,6 +565,8 @@ class RAC(CompiledSamples, Controller):
             Bp = X @ small_inv(G)
             q0dd = self.null_kp * (self.q_rest - q[self.arm_qadr]) - self.null_kd * qd[a]
             qdd_d[a] = Bp @ r_m + q0dd - Bp @ (Bm @ q0dd)
+        if self.limits.active:  # ours: the arm inside its joint ranges (discrete velocity damper)
+            qdd_d[a] = self.limits.clamp_acceleration(q[self.arm_qadr], qd[a], qdd_d[a])
 
         # Computed torque on the nominal model (Eq. 7 blocks), Eqs. 13 and 15.
         ix = self._ix
@@ -576,7 +591,8 @@ class RAC(CompiledSamples, Controller):
 
         self._pd_prev, self._e_p_prev = p_d, e_p
         self._q_prev, self._p_prev, self._J_prev = q, p, J
-        torques = u_M[self._motor_idx]  # joint torques for the motors' joints (in the motors' order)
+        # joint torques for the motors' joints (in the motors' order), inside the motors' ranges
+        torques = np.clip(u_M[self._motor_idx], r.motor_lo, r.motor_hi)
         signals = {"e_p": e_p, "e_v": e_v, "v_desired": v_d, "a_desired": a_d, "qdd_desired": qdd_d,
                    "u_B": u_B, "u_B_applied": u_applied, "f_E_hat": f_e_hat, "manipulability": manip,
                    "singular_phase": self.singular.phase, "dls_active": dls, "thrust_saturated": saturated}

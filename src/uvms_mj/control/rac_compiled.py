@@ -44,17 +44,19 @@ class CompiledSamples:
                  "clip_alloc": int(self.allocator is None), "alloc_input": int(self.observer_input == "allocated"),
                  "nthr": self.B.shape[1], "nwr": self.wrench_rows.size, "nmot": self._motor_idx.size,
                  "base_body": lay.base_body, "tip_site": lay.tip_site, "base_qadr": lay.base_qadr if self.free else 0,
-                 "wls_fast": 0, "nbv": self._ref_pos.size, "nlin": self.lin.size}
+                 "wls_fast": 0, "nbv": self._ref_pos.size, "nlin": self.lin.size,
+                 "joint_limits": int(self.limits.active)}
         if max(m.nv, self.ntask, na, nb) > _k.MAXN:
             return None
         params = {"T": self.T, "dls_threshold": self.dls_threshold, "dls_damping": self.dls_damping,
                   "null_kp": self.null_kp, "null_kd": self.null_kd, "g": self.g, "h": self.filter.h,
-                  "g_arm": self.g_arm, "h_arm": self.filter_arm.h}
+                  "g_arm": self.g_arm, "h_arm": self.filter_arm.h, "jl_beta": self.limits.beta}
         index = {"base_dofs": self.base_dofs, "arm_dofs": self.arm_dofs, "tip_rows": self.tip_rows,
                  "base_qpos": getattr(self, "base_qpos", ()), "arm_qadr": self.arm_qadr,
                  "wrench_rows": self.wrench_rows, "motor_idx": self._motor_idx, "lin": self.lin}
         const = {"gamma": self.gamma, "lam": self.lam, "q_rest": self.q_rest, "B": self.B, "B_pinv": self.B_pinv,
-                 "lo": self.lo, "hi": self.hi, "motor_lo": r.motor_lo, "motor_hi": r.motor_hi}
+                 "lo": self.lo, "hi": self.hi, "motor_lo": r.motor_lo, "motor_hi": r.motor_hi,
+                 "jnt_lo": self.limits.lo, "jnt_hi": self.limits.hi}
         if not self.free:
             const.update(Jb=self._Jb_const, Jb_pinvT=self._Jb_pinvT)
         al = self.allocator

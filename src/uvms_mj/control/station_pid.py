@@ -36,6 +36,7 @@ from typing import Any
 
 import numpy as np
 
+from uvms_mj.control.limits import JOINT_LIMIT_MARGIN, JointLimits
 from uvms_mj.control.nominal import JointTrajectory, NominalRobot
 from uvms_mj.rotations import quat_to_mat, rotation_log
 from uvms_mj.physics.thrusters import Allocator
@@ -97,6 +98,9 @@ class StationPID(Controller):
         station_attitude: the default station's attitude: "level" (default: roll = pitch = 0 at
             the measured yaw) | "measured" (the first measurement's as it is;
             :mod:`uvms_mj.control.station`).
+        joint_limits, joint_limit_margin: (ours; default true, 2 deg) clamp the joints' reference
+            (the initial posture, the arm waypoints, the tip path's IK state) into the nominal
+            ranges minus the margin (:mod:`uvms_mj.control.limits`).
     """
 
     robots = "floating"
@@ -107,7 +111,8 @@ class StationPID(Controller):
                  integral_time: float = 5.0, kp_position=None, kd_position=None, ki_position=None,
                  kp_attitude=None, kd_attitude=None, ki_attitude=None, kp_joints=None, kd_joints=None,
                  integral_limit: float = 0.5, feedforward: bool = True, base_reference=None,
-                 base_trajectory=None, station_attitude: str | None = None) -> None:
+                 base_trajectory=None, station_attitude: str | None = None, joint_limits: bool = True,
+                 joint_limit_margin: float = JOINT_LIMIT_MARGIN) -> None:
         if not isinstance(robot, NominalRobot):
             raise ControllerError("station_pid needs robot= a NominalRobot (a floating robot scenario)")
         self.base_reference = check_base_reference(base_reference)
@@ -128,6 +133,8 @@ class StationPID(Controller):
         self.feedforward = bool(feedforward)
         lay = robot.layout
         self.nj = len(lay.joint_names)
+        #: The arm joints' bounds on the nominal model (:mod:`uvms_mj.control.limits`).
+        self.limits = JointLimits(robot.model, lay.joint_qadr, self.T, joint_limits, joint_limit_margin)
         self.explicit = {k: _gains(k, v, 3) for k, v in (("kp_position", kp_position), ("kd_position", kd_position),
                                                           ("ki_position", ki_position), ("kp_attitude", kp_attitude),
                                                           ("kd_attitude", kd_attitude), ("ki_attitude", ki_attitude))}
@@ -194,7 +201,9 @@ class StationPID(Controller):
         v_d = np.asarray(self.trajectory.velocity(t), dtype=float)[:3]
         v = v_d + self.ik_gain * (p_d - jac["tip"])
         qd = B.T @ np.linalg.solve(B @ B.T + self.ik_damping ** 2 * np.eye(3), v)
-        self.q_ik = self.q_ik + self.T * qd
+        q_new = self.limits.clamp_position(self.q_ik + self.T * qd)  # inside the ranges (ours)
+        qd = (q_new - self.q_ik) / self.T
+        self.q_ik = q_new
         return self.q_ik.copy(), qd
 
     def compute(self, measurement: Measurement) -> Command:
@@ -250,6 +259,10 @@ class StationPID(Controller):
             qj_d, qdj_d = self.arm(measurement.t)
         else:
             qj_d, qdj_d = self.q_joint0, np.zeros(self.nj)
+        if self.limits.active:  # the joints' reference inside the nominal ranges (ours)
+            q_in = self.limits.clamp_position(qj_d)
+            qdj_d = np.where(q_in != qj_d, 0.0, qdj_d)
+            qj_d = q_in
         mi = self.motor_in_arm
         tau = (self.kp_j * (qj_d[mi] - qj[mi]) + self.kd_j * (qdj_d[mi] - qdj[mi])
                + h[r.motor_dofs])

@@ -129,6 +129,7 @@ import numpy as np
 
 from uvms_mj.control.digital import SingularHandler
 from uvms_mj.control.manipulability import PAPER_JS_RATIO, manipulability, resolve_thresholds
+from uvms_mj.control.limits import JOINT_LIMIT_MARGIN, JointLimits
 from uvms_mj.control.nominal import JointTrajectory, NominalRobot
 from uvms_mj.physics.thrusters import Allocator
 from uvms_mj.control.base import Command, Controller, ControllerError, Measurement, check_positive, register
@@ -313,6 +314,11 @@ class TaskPriority(Controller):
             module docstring "Reach").
         js, js_high, js_ratio, n_ramp: the carry's thresholds and ramp, as ``rac``'s Eq. 12 ones
             ("auto" = js_ratio x the arm's largest manipulability; js_high default js; 30 samples).
+        joint_limits, joint_limit_margin: (ours; default true, 2 deg) keep the integrated
+            reference q_r of the arm joints inside the nominal ranges minus the margin
+            (:mod:`uvms_mj.control.limits`): the arm rows of zeta_r are clipped so that
+            q_r + T zeta_r stays inside, and q_r itself is clamped (after the anti-windup pull-back).
+            The posture reference (arm waypoints) is clamped too.
     """
 
     robots = "floating"
@@ -327,7 +333,8 @@ class TaskPriority(Controller):
                  feedforward: bool = True, base_reference=None, base_trajectory=None,
                  station_attitude: str | None = None, carry: str = "hold", js: float | str = "auto",
                  js_high: float | str | None = None, js_ratio: float = PAPER_JS_RATIO, n_ramp: int = 30,
-                 joint_gains: str = "inertia") -> None:
+                 joint_gains: str = "inertia", joint_limits: bool = True,
+                 joint_limit_margin: float = JOINT_LIMIT_MARGIN) -> None:
         if not isinstance(robot, NominalRobot):
             raise ControllerError("task_priority needs robot= a NominalRobot (a floating robot scenario)")
         self.base_reference = check_base_reference(base_reference)
@@ -393,6 +400,8 @@ class TaskPriority(Controller):
                                      js_ratio=js_ratio)
             self.js, self.js_high = res["js"], res["js_high"]
             self.resolved_params.update({k: v for k, v in res.items() if k != "dls_threshold"})
+        #: The arm joints' bounds on the nominal model (:mod:`uvms_mj.control.limits`).
+        self.limits = JointLimits(robot.model, lay.joint_qadr, self.T, joint_limits, joint_limit_margin)
 
     # ------------------------------------------------------------------ pieces
 
@@ -451,7 +460,7 @@ class TaskPriority(Controller):
         if self.arm is None:
             return self.q_joint0.copy(), np.zeros(self.nj)
         qd, qdd = self.arm(t)
-        return np.asarray(qd, dtype=float), np.asarray(qdd, dtype=float)
+        return self.limits.clamp_position(np.asarray(qd, dtype=float)), np.asarray(qdd, dtype=float)
 
     # ------------------------------------------------------------------ interface
 
@@ -514,6 +523,16 @@ class TaskPriority(Controller):
             qr = q.copy()
             mujoco.mj_integratePos(model, qr, lead, 1.0)
             self.q_ref = qr
+        ja, jd = self.robot.layout.joint_qadr, self.joint_dofs
+        if self.limits.active:  # ours: q_r of the arm joints inside the nominal ranges (minus the margin)
+            qr_arm = self.limits.clamp_position(self.q_ref[ja])
+            if np.any(qr_arm != self.q_ref[ja]):
+                self.q_ref[ja] = qr_arm
+                lead = np.zeros(model.nv)
+                mujoco.mj_differentiatePos(model, lead, 1.0, q, self.q_ref)
+                lead = np.clip(lead, -lim, lim)
+            zeta_r = zeta_r.copy()
+            zeta_r[jd] = self.limits.clamp_rate(self.q_ref[ja], zeta_r[jd])
         u = self.kp * lead + self.kd * (zeta_r - zeta) + h
         if self.joint_gains == "inertia" and self.kp_given is None and self.kd_given is None:
             jd, w = self.joint_dofs, self.bandwidth_joints

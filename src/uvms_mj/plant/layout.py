@@ -25,7 +25,7 @@ import numpy as np
 from uvms_mj.plant.errors import ParameterError
 from uvms_mj.physics.thrusters import thruster_actuators
 
-__all__ = ["InitialState", "Layout"]
+__all__ = ["InitialState", "Layout", "motor_torque_range", "motor_torques"]
 
 
 # --------------------------------------------------------------------------- layout
@@ -165,6 +165,44 @@ class Layout:
                 "joints": list(self.joint_names), "thrusters": list(self.thruster_names),
                 "motors": list(self.motor_names), "motor_joints": list(self.motor_joints),
                 "tip_site": self.tip_name, "bodies": list(self.body_names)}
+
+
+def motor_torque_range(model: mujoco.MjModel, actuator_ids) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) of the joint torque [N m] (or force [N]) each motor can give: MuJoCo's clamps of a
+    motor, the control range (where ``ctrllimited``) times the gain, then the force range (where
+    ``forcelimited``), times the gear; -inf / +inf where not limited (the paper's motors)."""
+    ids = np.asarray(actuator_ids, dtype=int).ravel()
+    lo, hi = np.full(ids.size, -np.inf), np.full(ids.size, np.inf)
+    for i, a in enumerate(ids):
+        g = float(model.actuator_gainprm[a, 0])
+        f0, f1 = -np.inf, np.inf
+        if model.actuator_ctrllimited[a]:
+            c = g * model.actuator_ctrlrange[a]
+            f0, f1 = float(min(c)), float(max(c))
+        if model.actuator_forcelimited[a]:
+            f0, f1 = max(f0, float(model.actuator_forcerange[a, 0])), min(f1, float(model.actuator_forcerange[a, 1]))
+        gear = float(model.actuator_gear[a, 0])
+        t = sorted((gear * f0, gear * f1)) if gear else [0.0, 0.0]
+        lo[i], hi[i] = (0.0 if math.isnan(t[0]) else t[0]), (0.0 if math.isnan(t[1]) else t[1])
+    return lo, hi
+
+def motor_torques(model: mujoco.MjModel, actuator_ids, ctrl) -> np.ndarray:
+    """The joint torque [N m] (force [N] on a slide) each motor applies for the commands ``ctrl``
+    (one per actuator of ``actuator_ids``), as MuJoCo computes a motor's force: the command
+    clamped to ``ctrlrange`` (where ``ctrllimited``), times the gain, clamped to ``forcerange``
+    (where ``forcelimited``), times the gear (``data.actuator_force`` x gear after a step)."""
+    ids = np.asarray(actuator_ids, dtype=int).ravel()
+    c = np.array(ctrl, dtype=float).ravel()
+    lim = model.actuator_ctrllimited[ids].astype(bool)
+    if lim.any():
+        r = model.actuator_ctrlrange[ids]
+        c = np.where(lim, np.minimum(np.maximum(c, r[:, 0]), r[:, 1]), c)
+    f = model.actuator_gainprm[ids, 0] * c
+    lim = model.actuator_forcelimited[ids].astype(bool)
+    if lim.any():
+        r = model.actuator_forcerange[ids]
+        f = np.where(lim, np.minimum(np.maximum(f, r[:, 0]), r[:, 1]), f)
+    return model.actuator_gear[ids, 0] * f
 
 
 # --------------------------------------------------------------------------- initial state

@@ -52,7 +52,7 @@ from uvms_mj.physics.terms import HydroTerms
 from uvms_mj.plant.setup import resolve_backend, set_integration, water_terms
 from uvms_mj.plant import params as _params
 from uvms_mj.plant.files import default_model_path, models_dir, robot_path  # noqa: F401  (re-exported)
-from uvms_mj.plant.layout import InitialState, Layout
+from uvms_mj.plant.layout import InitialState, Layout, motor_torques
 from uvms_mj.plant.params import ParameterError, RobotParams, read_params
 from uvms_mj.plant.robot import Payload, _is_planar_spec, apply_model_overrides
 from uvms_mj.plant.stepping import (  # noqa: F401  (DivergenceError, Energy, mujoco_warnings: re-exported)
@@ -498,6 +498,13 @@ class Plant(Stepping):
         """The thrusters' actuator commands (``ctrl``: newtons for unit-gain thrusters, after the
         optional dead zone; else the actuator's units, e.g. a normalised voltage)."""
         return self.data.ctrl[self._thr].copy()
+
+    @property
+    def joint_torques_applied(self) -> np.ndarray:
+        """The joint torques the motors apply for the held commands [N m] (:attr:`Layout.motor_names`
+        order): MuJoCo's motor force after its ``ctrlrange`` / ``forcerange`` clamps, times the gear
+        (:func:`uvms_mj.plant.layout.motor_torques`; what the next step applies)."""
+        return motor_torques(self.model, self._mot, self.data.ctrl[self._mot])
 
     def thrust_to_ctrl(self, thrust: Sequence[float]) -> np.ndarray:
         """Actuator commands for thrusts [N] (the thrust itself for unit-gain thrusters; else

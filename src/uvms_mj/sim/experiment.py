@@ -31,6 +31,7 @@ from uvms_mj.control.trajectories import Line3D
 from uvms_mj.physics.terms import HydroTerms
 from uvms_mj.plant.params import compile_robot, read_params
 from uvms_mj.plant.plant import Plant
+from uvms_mj.sim.limits import joint_limit_excursion
 from uvms_mj.sim.loop import RunResult, SensorModel, run_closed_loop
 
 #: Tip displacement of the paper-like path: 0.3 m to the right (world +X), which stretches the
@@ -100,17 +101,43 @@ class PaperExperiment:
 
 
 METRIC_KEYS = ("base_pos_rms_mm", "base_pos_max_mm", "base_att_rms_mrad", "base_att_max_mrad", "tip_rms_mm",
-               "tip_max_mm", "thrust_rms_N", "torque_rms_Nm", "saturated_s")
+               "tip_max_mm", "thrust_rms_N", "torque_rms_Nm", "saturated_s", "joint_limit_excursion_deg")
+
+
+def _torques(s: dict):
+    """The joint torques the motors applied (``torques_applied``), else (an older log) the commands."""
+    tau = s.get("torques_applied")
+    return tau if tau is not None and len(tau) else s.get("torques", ())
+
+
+def excursion_metric(result: RunResult) -> float:
+    """``joint_limit_excursion_deg``: the largest excursion past a joint's range over joints and
+    samples [deg], from the true joint angles ``q_true`` and the plant's ranges in
+    ``meta["joint_ranges"]`` (:mod:`uvms_mj.sim.limits`); 0 inside every range, NaN for a log
+    without the ranges."""
+    q = result.signals.get("q_true")
+    ranges = (result.meta or {}).get("joint_ranges")
+    if q is None or len(q) == 0:
+        return float("nan")
+    return joint_limit_excursion(q, ranges, result.t)["deg"]
 
 
 def metrics(result: RunResult) -> dict[str, float]:
     """RMS and max of the base position error, base attitude error and end-tip error (true state
-    against the desired one), RMS thrust, and time with a thruster saturated. All NaN when the
+    against the desired one), RMS thrust (applied) and joint torque (applied), time with a
+    thruster saturated, the joint-limit excursion (:func:`excursion_metric`). NaN when the
     run has no sample with these signals (never raises for a short or broken run)."""
+    out = _metrics(result)
+    out["joint_limit_excursion_deg"] = excursion_metric(result)
+    return out
+
+
+def _metrics(result: RunResult) -> dict[str, float]:
     s = result.signals
     if "base_desired" in s or (result.meta or {}).get("robot"):
         return robot_metrics(result)
     needed = ("p_desired", "q_true", "tip_true", "thrust_force", "torques")
+    tau = _torques(s)
     if any(k not in s or len(s[k]) == 0 for k in needed):
         # A run that stopped before its first sample, or a controller that does not log its
         # desired task (p_desired is optional for plug-ins): the metrics its signals allow.
@@ -118,8 +145,8 @@ def metrics(result: RunResult) -> dict[str, float]:
         rms_ = lambda x: float(np.sqrt(np.mean(np.square(x))))  # noqa: E731
         if len(s.get("thrust_force", ())):
             out["thrust_rms_N"] = rms_(s["thrust_force"])
-        if len(s.get("torques", ())):
-            out["torque_rms_Nm"] = rms_(s["torques"])
+        if len(tau):
+            out["torque_rms_Nm"] = rms_(tau)
         if len(s.get("thrust_force", ())):
             sat = s.get("thrust_saturated")
             out["saturated_s"] = (float(np.any(sat, axis=1).sum() * result.meta.get("T", 1 / 60))
@@ -140,7 +167,7 @@ def metrics(result: RunResult) -> dict[str, float]:
         "tip_rms_mm": 1e3 * rms(tip),
         "tip_max_mm": 1e3 * float(tip.max()),
         "thrust_rms_N": rms(s["thrust_force"]),
-        "torque_rms_Nm": rms(s["torques"]),
+        "torque_rms_Nm": rms(tau),
         "saturated_s": float(np.any(s["thrust_saturated"], axis=1).sum() * T) if "thrust_saturated" in s else 0.0,
     }
 
@@ -159,14 +186,16 @@ def robot_metrics(result: RunResult) -> dict[str, float]:
       desired and the true orientation, 2 acos |<q_d, q>| [mrad];
     * tip: |tip_d - tip| [mm] (NaN without ``tip_desired``); ``joint_rms_mrad``: RMS over
       samples and joints of q_d - q (NaN without ``joints_desired``);
-    * thrust and torque RMS; ``saturated_s``: time with a thruster at its force limit (from
-      ``thrust_force`` against the logged limits, 0 when unknown).
+    * thrust and joint torque RMS (what the thrusters and motors applied); ``saturated_s``: time with a thruster at its force limit (from
+      ``thrust_force`` against the logged limits, 0 when unknown);
+    * ``joint_limit_excursion_deg``: :func:`excursion_metric`.
 
     A metric whose signal is missing is NaN; never raises."""
     s = result.signals
     nan = float("nan")
     out = {k: nan for k in METRIC_KEYS}
     out["joint_rms_mrad"] = nan
+    out["joint_limit_excursion_deg"] = excursion_metric(result)
     rms = lambda x: float(np.sqrt(np.mean(np.square(x)))) if np.size(x) else nan  # noqa: E731
     q = s.get("q_true")
     if q is None or len(q) == 0:
@@ -191,8 +220,8 @@ def robot_metrics(result: RunResult) -> dict[str, float]:
         out["joint_rms_mrad"] = 1e3 * rms(jd - q[:, jq])
     if "thrust_force" in s:
         out["thrust_rms_N"] = rms(s["thrust_force"])
-    if "torques" in s:
-        out["torque_rms_Nm"] = rms(s["torques"])
+    if len(_torques(s)):
+        out["torque_rms_Nm"] = rms(_torques(s))
     out["saturated_s"] = float(np.any(s["thrust_saturated"], axis=1).sum() * result.meta.get("T", 0.02)) \
         if "thrust_saturated" in s else 0.0
     return out

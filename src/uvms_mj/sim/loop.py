@@ -19,6 +19,7 @@ import numpy as np
 from uvms_mj.control.base import Command, Controller, Measurement
 from uvms_mj.plant.plant import DivergenceError, Plant, mujoco_warnings
 from uvms_mj.rotations import quat_from_rotvec, quat_mul
+from uvms_mj.sim.limits import joint_limit_status, plant_joint_ranges
 from uvms_mj.sim.sensors import Signal, SignalSensors
 
 
@@ -81,11 +82,15 @@ class RunResult:
     Attributes:
         t: sample times [s] (N).
         signals: name -> array (N, ...) of controller signals, thruster forces and the true state
-            (``q_true``, ``qd_true``, ``tip_true``, ``thrust_command``, ``thrust_force``,
-            ``torques``).
-        status: "ok" or "diverged".
-        reason: why it stopped early ("" if ok).
-        meta: ``T``, ``dt``, ``seed``, ``controller`` and, for a controller with a
+            (``q_true``, ``qd_true``, ``tip_true``; ``thrust_command``: the controller's thrusts,
+            ``thrust_force``: what the thrusters give at the sample, lagged and clipped;
+            ``torques``: the controller's joint torques, ``torques_applied``: what the motors
+            apply over the sample, after MuJoCo's control and force ranges).
+        status: "ok", "diverged" or "joint_limit" (finished, but a joint left the plant's
+            range by more than :data:`uvms_mj.sim.limits.JOINT_LIMIT_TOLERANCE_DEG`).
+        reason: why it stopped early, or which joint left its range ("" if ok).
+        meta: ``T``, ``dt``, ``seed``, ``controller``, ``joint_ranges`` (the plant's limited
+            hinges, :func:`uvms_mj.sim.limits.plant_joint_ranges`) and, for a controller with a
             ``resolved_params`` dict (RAC: its thresholds as numbers), ``controller_params``.
     """
 
@@ -243,6 +248,7 @@ def run_closed_loop(
     # the state at each sample: observed once, then read by each step (Plant.step_observe: the
     # compiled sample where it can); the thrust read after the commands where it follows them
     state = _observe(plant)
+    has_applied = hasattr(plant, "joint_torques_applied")  # else (a plant without motor ranges): the command
     for k in range(n):
         if on_event is not None:
             on_event(k * T)
@@ -264,13 +270,14 @@ def run_closed_loop(
                                           f"at t = {k * T:.4f} s")
             break
         _command(plant, thrust, torques)
+        applied = plant.joint_torques_applied if has_applied else torques
         if k == 0 and warm_start:
             plant.warm_start(thrust)
         times.append(k * T)
         row = {**cmd.signals, "q_true": q_true, "qd_true": qd_true, "tip_true": tip_true, "q_measured": meas.q,
                "thrust_command": thrust,
                "thrust_force": thr_lagged if thr_lagged is not None and k > 0 else plant.thruster_forces,
-               "torques": torques}
+               "torques": torques, "torques_applied": applied}
         if sea_signals is not None:
             row.update(sea_signals())
         rows.append(row)
@@ -295,7 +302,12 @@ def run_closed_loop(
         signals = {key: np.asarray(list(map(operator.itemgetter(key), rows))) for key in keys}
     else:
         signals = {key: np.asarray([row[key] for row in rows if key in row]) for key in keys}
-    meta = {"T": T, "dt": dt, "seed": seed, "controller": controller_name(controller)}
+    ranges = plant_joint_ranges(plant.model)
+    meta = {"T": T, "dt": dt, "seed": seed, "controller": controller_name(controller), "joint_ranges": ranges}
+    if status == "ok" and ranges and "q_true" in signals:  # finished: did a joint leave the plant's range?
+        why = joint_limit_status(signals["q_true"], ranges, np.asarray(times))
+        if why:
+            status, reason = "joint_limit", why
     resolved = getattr(controller, "resolved_params", None)  # parameters resolved at construction (RAC's thresholds)
     if isinstance(resolved, dict):
         meta["controller_params"] = dict(resolved)

@@ -229,10 +229,12 @@ def _actuation_figure(log, title: str) -> Figure:
     ax[2, 0].set_xlabel("time t [s]")
 
     a = ax[0, 1]
-    tau = _sig(log, "torques")
+    tau, app = _sig(log, "torques"), _sig(log, "torques_applied")
     if tau is not None:
         for j in range(min(2, tau.shape[1])):
             a.plot(t, tau[:, j], color=_XY[j], lw=1.1, label=rf"$\tau_{{{j + 1}}}$ (joint {j + 1})")
+            if app is not None and app.shape == tau.shape and not np.array_equal(app[:, j], tau[:, j]):
+                a.plot(t, app[:, j], ":", color=_XY[j], lw=1.3, label=rf"$\tau_{{{j + 1}}}$ applied")
     else:
         _missing(a, "no joint torques in this log")
     _finish(a, "torque [N m]", "(d) joint torques")

@@ -216,11 +216,17 @@ def _robot_actuation_figure(log, robot: Mapping[str, Any], title: str) -> Figure
         _finish(a, "thrust [N]", "(a) thruster forces", legend=False)
 
     a = ax[1]
-    tau = _sig(log, "torques")
+    tau, app = _sig(log, "torques"), _sig(log, "torques_applied")
     if tau is not None and tau.ndim == 2 and tau.shape[1]:
+        both = app is not None and app.shape == tau.shape
         for i, name in enumerate(_names(robot, "motors", tau.shape[1], "motor")):
-            a.plot(t, tau[:, i], color=_COLORS[i % len(_COLORS)], lw=1.1, label=name)
-        _finish(a, "torque [N m]", "(b) joint torques", legend=False)
+            c = _COLORS[i % len(_COLORS)]
+            if both:
+                a.plot(t, app[:, i], "-", color=c, lw=1.1, label=name)
+            a.plot(t, tau[:, i], "--" if both else "-", color=c, lw=1.0 if both else 1.1, alpha=0.8 if both else 1.0,
+                   label=None if both else name)
+        what = ": applied (solid) and command (dashed)" if both else " (command)"
+        _finish(a, "torque [N m]", f"(b) joint torques{what}", legend=False)
         a.legend(fontsize=7, loc="best", ncol=4, framealpha=0.85)
     else:
         _missing(a, "no joint torques (no arm, or not logged)")

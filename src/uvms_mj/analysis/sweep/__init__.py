@@ -82,7 +82,7 @@ Outputs (in ``--out-dir DIR``)
 * ``runs.jsonl``: one line per finished run, appended as runs finish (the resume record);
 * ``results.csv`` (and ``results.parquet`` when pyarrow is installed): one row per run:
   ``run_id, sample, controller, seed``, one column per axis, every metric of
-  :func:`uvms_mj.sim.experiment.metrics`, ``status`` (ok | diverged | error | crashed), ``reason``,
+  :func:`uvms_mj.sim.experiment.metrics`, ``status`` (ok | diverged | joint_limit | error | crashed), ``reason``,
   ``t_end`` (simulated time reached), ``wall_s``, ``log`` (MCAP path with ``--logs``, else
   empty), ``values`` (JSON: the value each varied field got), ``sets`` (JSON: the ``--set``
   arguments that reproduce the run with ``uvms-mj run SCENARIO``), ``key``;
@@ -104,6 +104,8 @@ process that died is retried). A different definition (scenario content, specs, 
 (``--fresh``) deletes the old results first. ``workers``, ``engine`` and ``logs`` may change.
 
 Failures: a run that diverges is recorded with status ``diverged`` and its reason; one that
+finishes with a joint more than 1 deg past the plant's range, with ``joint_limit`` (counted as
+failed, shown apart in the summary's status counts; its metrics are complete); one that
 raises, with ``error`` and the exception; a worker process that dies (e.g. a crash in native
 code) is retried up to twice in a fresh pool, then recorded as ``crashed``. None stops the
 sweep.

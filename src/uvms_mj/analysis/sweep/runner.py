@@ -20,7 +20,7 @@ from uvms_mj.analysis.sweep.summary import summarize
 from uvms_mj.analysis.sweep.table import _row, _write_table
 
 #: The statuses of a finished run (not retried on resume; ``crashed`` is).
-FINISHED = ("ok", "diverged", "error")
+FINISHED = ("ok", "diverged", "error", "joint_limit")
 
 
 def _read_jsonl(path: Path) -> list[dict]:

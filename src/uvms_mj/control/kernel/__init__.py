@@ -29,10 +29,11 @@ KERNEL_SOURCE = Path(__file__).resolve().parent / "rac_kernel.c"
 
 _INT_FIELDS = ("nq", "nv", "nb", "na", "ntask", "nbt", "ntr", "nvec", "free_base", "tip_orient", "square",
                "observer", "observer_arm", "clip_alloc", "alloc_input", "nthr", "nwr", "nmot", "base_body",
-               "tip_site", "base_qadr", "wls_fast", "nbv", "nlin")
+               "tip_site", "base_qadr", "wls_fast", "nbv", "nlin", "joint_limits")
 _INDEX_FIELDS = ("base_dofs", "arm_dofs", "tip_rows", "base_qpos", "arm_qadr", "wrench_rows", "motor_idx", "lin")
-_PARAM_FIELDS = ("T", "dls_threshold", "dls_damping", "null_kp", "null_kd", "g", "h", "g_arm", "h_arm")
-_CONST_FIELDS = ("gamma", "lam", "q_rest", "Jb", "Jb_pinvT", "B", "B_pinv", "lo", "hi", "motor_lo", "motor_hi", "Q")
+_PARAM_FIELDS = ("T", "dls_threshold", "dls_damping", "null_kp", "null_kd", "g", "h", "g_arm", "h_arm", "jl_beta")
+_CONST_FIELDS = ("gamma", "lam", "q_rest", "Jb", "Jb_pinvT", "B", "B_pinv", "lo", "hi", "motor_lo", "motor_hi", "Q",
+                 "jnt_lo", "jnt_hi")
 _ARRAY_FIELDS = ("q", "qd_meas", "pd", "Rd", "pdn", "Rdn",
                  "q_prev", "p_prev", "R_prev", "J_prev", "e_p_prev", "pd_prev", "Rd_prev", "z", "z_arm",
                  "qd", "M", "hb", "J", "p", "R", "R_base", "pd_meas", "scalars",

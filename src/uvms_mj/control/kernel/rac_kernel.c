@@ -12,7 +12,8 @@
 //   (Python)           Eq. 12 (SingularHandler: the base's desired velocity) and the desired tip
 //                      at k + 1;
 //   uvms_rac_command   the desired point p_d(k+1) (base reference + Eq. 12 offset, tip; p_d(k) is
-//                      the last sample's), Eqs. 10-11, Eq. 9 (block solution), Eqs. 13 and 15, the base force as a
+//                      the last sample's), Eqs. 10-11, Eq. 9 (block solution), the arm's joint-limit
+//                      clamp (ours: limits.clamp_joint_acceleration), Eqs. 13 and 15, the base force as a
 //                      body wrench, the "clip" allocation or the "wls" Allocator's fast path
 //                      (returns 1 when that does not apply: Python's Allocator gives the thrusts);
 //   uvms_rac_finish    the achieved base force, the observers' updates (Eq. 14 corrected,
@@ -34,12 +35,15 @@ typedef struct {
   int free_base, tip_orient, square, observer, observer_arm, clip_alloc, alloc_input;
   int nthr, nwr, nmot, base_body, tip_site, base_qadr, wls_fast;
   int nbv, nlin;  // base entries of a desired point (p_d = base, tip), of them the Eq. 12 offset's
+  int joint_limits;  // clamp the arm's desired accelerations (uvms_mj/control/limits.py's velocity damper)
   // index arrays
   const int *base_dofs, *arm_dofs, *tip_rows, *base_qpos, *arm_qadr, *wrench_rows, *motor_idx;
   const int* lin;  // where the offset's entries are in the base part of p_d
   // parameters
   double T, dls_threshold, dls_damping, null_kp, null_kd, g, h, g_arm, h_arm;
+  double jl_beta;  // the damper's beta = T / tau
   const double *gamma, *lam, *q_rest, *Jb, *Jb_pinvT, *B, *B_pinv, *lo, *hi, *motor_lo, *motor_hi, *Q;
+  const double *jnt_lo, *jnt_hi;  // the arm joints' bounds (nominal range minus the margin; +-inf: none)
   // per-sample inputs (q, measured qd) and desired points p_d(k), p_d(k+1): vector, rotations
   double *q, *qd_meas, *pd, *Rd, *pdn, *Rdn;
   // state carried to the next sample
@@ -391,6 +395,19 @@ int uvms_rac_command(uvms_rac* s, int first, int moving) {
       qdd[a[j]] = acc + q0dd[j];
     }
   }
+  // ours: each arm joint's desired acceleration inside the discrete velocity damper's bounds
+  // (limits.clamp_joint_acceleration: a_hi = (beta (hi - q) / T - (1 + beta) qd) / (T (1 + beta / 2)))
+  if (s->joint_limits) {
+    const double beta = s->jl_beta, den = T * (1.0 + 0.5 * beta);
+    for (int j = 0; j < na; j++) {
+      double qj = s->q[s->arm_qadr[j]], vj = s->qd[a[j]];
+      double a_hi = (beta * (s->jnt_hi[j] - qj) / T - (1.0 + beta) * vj) / den;
+      double a_lo = (beta * (s->jnt_lo[j] - qj) / T - (1.0 + beta) * vj) / den;
+      double v = qdd[a[j]];
+      v = v > a_lo ? v : a_lo;
+      qdd[a[j]] = v < a_hi ? v : a_hi;
+    }
+  }
   // Computed torque on the nominal model (Eq. 7 blocks), Eqs. 13 and 15
   for (int i = 0; i < na; i++) {
     double acc = 0.0, macc = 0.0, qacc = 0.0;
@@ -505,7 +522,10 @@ int uvms_rac_finish(uvms_rac* s) {
       s->z_arm[i] = s->h_arm * s->z_arm[i] + (1.0 - s->h_arm) * w;
     }
   }
-  for (int k = 0; k < s->nmot; k++) s->torques[k] = s->u_M[s->motor_idx[k]];
+  for (int k = 0; k < s->nmot; k++) {  // inside the motors' ranges
+    double v = s->u_M[s->motor_idx[k]];
+    s->torques[k] = v < s->motor_lo[k] ? s->motor_lo[k] : (v > s->motor_hi[k] ? s->motor_hi[k] : v);
+  }
   if (s->free_base) mju_mat2Quat(s->base_quat, s->Rd);
   // the state for the next sample (its p_d(k) is this one's p_d(k + 1))
   mju_copy(s->pd_out, s->pd, s->nvec);
