@@ -115,7 +115,7 @@ def _names(signal: str, size: int, lay: dict, controller: str) -> list[str] | No
         return list(_RPY)
     if signal in _THRUST:
         return list(lay["thrusters"])
-    if signal == "torques":
+    if signal in ("torques", "torques_applied"):
         return list(lay["motors"])
     if signal in _JOINT:
         return list(joints)
