@@ -48,6 +48,7 @@ from typing import Any
 import mujoco
 import numpy as np
 
+from uvms_mj.control.delay_observer import DELAY_OBSERVER_POLE, DelayObserver
 from uvms_mj.control.margins import GAIN_MARGIN, DelayPredictor, auto_gains, check_margin_settings, thruster_lag
 from uvms_mj.control.limits import JOINT_LIMIT_MARGIN, JOINT_LIMIT_TIME, JointLimits
 from uvms_mj.control.manipulability import DLS_RATIO, PAPER_JS_RATIO, manipulability, resolve_thresholds, small_inv
@@ -131,6 +132,13 @@ class RAC(CompiledSamples, Controller):
             the measurement is advanced d samples by the commanded accelerations of the previous
             samples before the per-sample algebra. It does not predict the thrusters' lag, the
             observer's estimate or a disturbance.
+        delay_observer_pole: (ours) with delay_compensation > 0: the triple pole p of the
+            predictive state observer :class:`uvms_mj.control.delay_observer.DelayObserver`
+            (position, velocity, acceleration mismatch per coordinate, corrected by each delayed
+            measurement; the controller gets its predicted q and filtered velocity), default
+            0.85 (:data:`~uvms_mj.control.delay_observer.DELAY_OBSERVER_POLE`: the fastest pole
+            stable for plant gains 0.7..2.5 with the paper's gains); None: the open-loop
+            :class:`~uvms_mj.control.margins.DelayPredictor`.
         js, js_high: Eq. 12 thresholds on the manipulability w: "auto" (js's default) = js_ratio
             (js_high_ratio, default js_ratio) x the arm's largest w over its joint ranges -- 0.72,
             the paper's 0.045 on its arm (:mod:`uvms_mj.control.manipulability`) -- or a number
@@ -216,6 +224,7 @@ class RAC(CompiledSamples, Controller):
         carry: str = "auto",
         gain_margin: float = GAIN_MARGIN,
         delay_compensation: int = 0,
+        delay_observer_pole: float | None = DELAY_OBSERVER_POLE,
         joint_limits: bool = True,
         joint_limit_margin: float = JOINT_LIMIT_MARGIN,
         joint_limit_time: float = JOINT_LIMIT_TIME,
@@ -267,8 +276,14 @@ class RAC(CompiledSamples, Controller):
         self.gamma = _gains("gamma", gamma, default)
         self.lam = _gains("lambda", lam, default)
         self.delay_compensation = int(delay_compensation)
-        self._predictor = (DelayPredictor(m, self.T, self.delay_compensation, self.base_dofs, thruster_lag(m))
-                           if self.delay_compensation else None)
+        self.delay_observer_pole = delay_observer_pole
+        if not self.delay_compensation:
+            self._predictor = None
+        elif delay_observer_pole is None:  # the open-loop prediction
+            self._predictor = DelayPredictor(m, self.T, self.delay_compensation, self.base_dofs, thruster_lag(m))
+        else:
+            self._predictor = DelayObserver(m, self.T, self.delay_compensation, self.base_dofs, thruster_lag(m),
+                                            delay_observer_pole)
         # B's rows of [jacp; jacr]: the tip rows of the task
         rows = self.tip_rows if not self.free else np.arange(6 if self.tip_orientation else 3)
         #: The thresholds as numbers ("auto" resolved; what a run records: sim.loop's meta["controller_params"]).
