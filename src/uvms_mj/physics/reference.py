@@ -32,9 +32,8 @@ import mujoco
 import numpy as np
 
 from uvms_mj.physics.config import BodyHydro, WaterParams, resolve
+from uvms_mj.physics.rng import MASK, splitmix64
 from uvms_mj.physics.waves import Sea, sea_of
-
-_MASK = (1 << 64) - 1
 
 CurrentState = tuple  # (t_k: float, k: int, v_k: (3,), v_next: (3,))
 
@@ -112,18 +111,6 @@ def bias_acceleration(m: mujoco.MjModel, d: mujoco.MjData, b: int, pos, quat, v_
 # -------------------------------------------------------------------------------- current
 
 
-def splitmix64(z: int) -> int:
-    """SplitMix64 finaliser on unsigned 64-bit integers:
-
-        z += 0x9E3779B97F4A7C15; z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9;
-        z = (z ^ (z >> 27)) * 0x94D049BB133111EB; return z ^ (z >> 31)   (mod 2^64)
-    """
-    z = (z + 0x9E3779B97F4A7C15) & _MASK
-    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & _MASK
-    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & _MASK
-    return z ^ (z >> 31)
-
-
 def gm_normal(seed: int, k: int, c: int) -> float:
     """Standard normal n_k of component c at sample k (counter-based, Box-Muller):
 
@@ -131,10 +118,10 @@ def gm_normal(seed: int, k: int, c: int) -> float:
         u1 = ((a >> 11) + 1) 2^-53 in (0, 1],  u2 = (b >> 11) 2^-53 in [0, 1)
         n = sqrt(-2 log u1) cos(2 pi u2)
     """
-    seed &= _MASK
-    i = (6 * k + 2 * c) & _MASK
+    seed &= MASK
+    i = (6 * k + 2 * c) & MASK
     a = splitmix64(seed ^ splitmix64(i))
-    b = splitmix64(seed ^ splitmix64((i + 1) & _MASK))
+    b = splitmix64(seed ^ splitmix64((i + 1) & MASK))
     u1 = ((a >> 11) + 1) * 2.0**-53
     u2 = (b >> 11) * 2.0**-53
     return math.sqrt(-2.0 * math.log(u1)) * math.cos(2.0 * math.pi * u2)

@@ -28,6 +28,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from uvms_mj.physics.rng import MASK, splitmix64
+
 __all__ = [
     "BAND",
     "DEFAULT_COMPONENTS",
@@ -52,20 +54,12 @@ BAND = (0.5, 4.0)
 DEFAULT_GAMMA = 3.3
 MAX_SPREADING = 100.0
 MAX_COMPONENTS = 10000
-_MASK = (1 << 64) - 1
-
-
-def _splitmix64(z: int) -> int:
-    z = (z + 0x9E3779B97F4A7C15) & _MASK
-    z = ((z ^ (z >> 30)) * 0xBF58476D1CE4E5B9) & _MASK
-    z = ((z ^ (z >> 27)) * 0x94D049BB133111EB) & _MASK
-    return z ^ (z >> 31)
 
 
 def wave_uniform(seed: int, i: int, c: int) -> float:
     """Uniform number c of component i of the stream ``seed``, in [0, 1):
     (splitmix64(seed ^ splitmix64(4096 i + c)) >> 11) 2^-53."""
-    return (_splitmix64((seed & _MASK) ^ _splitmix64((4096 * i + c) & _MASK)) >> 11) * 2.0**-53
+    return (splitmix64((seed & MASK) ^ splitmix64((4096 * i + c) & MASK)) >> 11) * 2.0**-53
 
 
 def wavenumber(omega, depth: float, g: float):

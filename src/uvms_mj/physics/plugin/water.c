@@ -172,18 +172,11 @@ typedef struct {
 
 /* ------------------------------------------------------------------ counter-based normals */
 
-static uint64_t splitmix64(uint64_t z) {
-  z += 0x9E3779B97F4A7C15ULL;
-  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
-  z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
-  return z ^ (z >> 31);
-}
-
 /* Standard normal number k, component c (0, 1, 2) of the stream `seed`. */
 static double gm_normal(uint64_t seed, uint64_t k, int c) {
   uint64_t i = 6 * k + 2 * (uint64_t)c;
-  uint64_t a = splitmix64(seed ^ splitmix64(i));
-  uint64_t b = splitmix64(seed ^ splitmix64(i + 1));
+  uint64_t a = uvms_splitmix64(seed ^ uvms_splitmix64(i));
+  uint64_t b = uvms_splitmix64(seed ^ uvms_splitmix64(i + 1));
   double u1 = (double)((a >> 11) + 1) * 0x1p-53;
   double u2 = (double)(b >> 11) * 0x1p-53;
   return sqrt(-2.0 * log(u1)) * cos(2.0 * M_PI * u2);

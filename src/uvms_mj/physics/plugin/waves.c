@@ -45,7 +45,7 @@
 
 #define WAVES_NC 7
 
-static uint64_t wv_splitmix64(uint64_t z) {
+uint64_t uvms_splitmix64(uint64_t z) {
   z += 0x9E3779B97F4A7C15ULL;
   z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
   z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
@@ -54,7 +54,7 @@ static uint64_t wv_splitmix64(uint64_t z) {
 
 /* uniform number c of component i of the stream seed, in [0, 1) */
 static double wv_uniform(uint64_t seed, uint64_t i, uint64_t c) {
-  return (double)(wv_splitmix64(seed ^ wv_splitmix64(4096 * i + c)) >> 11) * 0x1p-53;
+  return (double)(uvms_splitmix64(seed ^ uvms_splitmix64(4096 * i + c)) >> 11) * 0x1p-53;
 }
 
 double uvms_waves_wavenumber(double omega, double depth, double g) {

@@ -37,6 +37,11 @@ typedef struct {
   double* c;           /* 7 per component: a, omega, k, cos(theta), sin(theta), phase, spare */
 } waves_t;
 
+/* SplitMix64 finaliser (mod 2^64): the counter-based random streams of the water plugin (the
+ * Gauss-Markov current's normals, water.c; the waves' offsets, phases and directions, waves.c);
+ * uvms_mj.physics.rng.splitmix64 in Python. */
+uint64_t uvms_splitmix64(uint64_t z);
+
 /* omega^2 = g k tanh(k h) solved for k (h <= 0: deep water, k = omega^2 / g). */
 double uvms_waves_wavenumber(double omega, double depth, double g);
 /* the one-sided spectrum S(omega) [m^2 s/rad] of the params (JONSWAP or PM). */
