@@ -149,17 +149,24 @@ def test_the_singular_phase_engages_only_near_the_stretch():
 def test_from_the_shipped_near_singular_posture_the_path_carry_arrives():
     """The shipped Alpha posture (shoulder 110, elbow 70 deg: w = 0.125 w_max < js, the singular
     phase on from the first sample): the paper's "cruise" carry keeps the cruise velocity until
-    a release that never comes and the tip misses the 0.3 m line's end by > 0.1 m; "path"
-    (the default on a floating robot) moves the base with the path and the tip arrives."""
+    a release that never comes: at 35 s (the line ended at 17 s) the tip misses the 0.3 m
+    line's end by > 0.1 m (measured 0.39 m) with the vehicle still cruising and the arm folded
+    against its joint ranges, and the run may diverge after that (measured: at 37.04 s, when the
+    folded arm flips round its base joint); "path" (the default on a floating robot) moves the
+    base with the path, the tip arrives and the run ends "ok"."""
     sets = ["initial.joints={alpha_shoulder: 110, alpha_elbow: 70}",
             "trajectory={kind: line, displacement: [0.3, 0, 0]}", "duration=40"]
     out = {}
     for carry in ("cruise", "path"):
         plant, ctrl, res = _run("rac", [*sets, f"controller.params.carry={carry}"])
-        assert res.status == "ok", res.reason
         target = np.asarray(ctrl.trajectory.position(1e3), dtype=float)
-        out[carry] = float(np.linalg.norm(res.signals["tip_true"][-1] - target))
-        assert _excursion(plant, res.signals["q_true"]) < JOINT_SLACK
+        k = int(np.searchsorted(res.t, 35.0))
+        assert k < len(res.t), res.reason
+        out[carry] = float(np.linalg.norm(res.signals["tip_true"][k] - target))
+        assert _excursion(plant, res.signals["q_true"][: k + 1]) < JOINT_SLACK
+        if carry == "path":
+            assert res.status == "ok", res.reason
+            assert float(np.linalg.norm(res.signals["tip_true"][-1] - target)) < TIP_FINAL_MAX
     assert out["path"] < TIP_FINAL_MAX and out["cruise"] > 0.1
 
 
