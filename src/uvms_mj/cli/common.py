@@ -31,9 +31,10 @@ METRIC_LABELS = {
     "saturated_s": "thrusters saturated [s]",
     "joint_rms_mrad": "arm joints RMS [mrad]",
     "joint_limit_excursion_deg": "joint limit excursion [deg]",
+    "singular_s": "Eq. 12 singular phase [s]",
 }
-#: Rows shown only when some run has a value (floating-robot metrics).
-_OPTIONAL_ROWS = ("joint_rms_mrad",)
+#: Rows shown only when some run has a value (floating-robot metrics; controllers with Eq. 12).
+_OPTIONAL_ROWS = ("joint_rms_mrad", "singular_s")
 
 
 def metrics_table(results: dict[str, dict[str, float]], status: dict[str, str] | None = None) -> str:

@@ -101,7 +101,8 @@ class PaperExperiment:
 
 
 METRIC_KEYS = ("base_pos_rms_mm", "base_pos_max_mm", "base_att_rms_mrad", "base_att_max_mrad", "tip_rms_mm",
-               "tip_max_mm", "thrust_rms_N", "torque_rms_Nm", "saturated_s", "joint_limit_excursion_deg")
+               "tip_max_mm", "thrust_rms_N", "torque_rms_Nm", "saturated_s", "joint_limit_excursion_deg",
+               "singular_s")
 
 
 def _torques(s: dict):
@@ -125,11 +126,23 @@ def excursion_metric(result: RunResult) -> float:
 def metrics(result: RunResult) -> dict[str, float]:
     """RMS and max of the base position error, base attitude error and end-tip error (true state
     against the desired one), RMS thrust (applied) and joint torque (applied), time with a
-    thruster saturated, the joint-limit excursion (:func:`excursion_metric`). NaN when the
+    thruster saturated, the joint-limit excursion (:func:`excursion_metric`), the time in Eq. 12's
+    singular phase (:func:`singular_metric`). NaN when the
     run has no sample with these signals (never raises for a short or broken run)."""
     out = _metrics(result)
     out["joint_limit_excursion_deg"] = excursion_metric(result)
+    out["singular_s"] = singular_metric(result)
     return out
+
+
+def singular_metric(result: RunResult) -> float:
+    """``singular_s``: the time [s] with Eq. 12's singular phase on (``singular_phase`` != 0:
+    the base carries the arm, the reference of the base moves), number of such samples x T; NaN
+    for a controller without Eq. 12 (no ``singular_phase`` signal) or a run without samples."""
+    ph = result.signals.get("singular_phase")
+    if ph is None or len(ph) == 0:
+        return float("nan")
+    return float(np.count_nonzero(np.asarray(ph) != 0) * (result.meta or {}).get("T", 1 / 60))
 
 
 def _metrics(result: RunResult) -> dict[str, float]:

@@ -16,7 +16,7 @@ from uvms_mj.analysis.sweep.spec import _is_num
 
 #: The metrics of :func:`uvms_mj.sim.experiment.metrics`, in table order (others found are appended).
 METRICS = ("base_pos_rms_mm", "base_pos_max_mm", "base_att_rms_mrad", "base_att_max_mrad", "tip_rms_mm",
-           "tip_max_mm", "thrust_rms_N", "torque_rms_Nm", "saturated_s")
+           "tip_max_mm", "thrust_rms_N", "torque_rms_Nm", "saturated_s", "singular_s")
 
 
 def _columns(plan: SweepPlan, rows: Iterable[dict]) -> list[str]:
