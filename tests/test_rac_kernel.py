@@ -174,7 +174,7 @@ def test_desired_tip_blocks_are_the_per_sample_path():
     """RAC reads the paper line's desired tips in blocks (StraightLine.positions, over several
     blocks of TIP_BLOCK samples in 40 s): the run is the same, bit for bit, as with a trajectory
     offering only position(t) (evaluated sample by sample)."""
-    from uvms_mj.control.rac import TIP_BLOCK
+    from uvms_mj.control.rac_task import TIP_BLOCK
 
     class PerSample:  # the same line without positions()
         def __init__(self, line):

@@ -133,7 +133,7 @@ from uvms_mj.control.limits import JOINT_LIMIT_MARGIN, JointLimits
 from uvms_mj.control.nominal import JointTrajectory, NominalRobot
 from uvms_mj.physics.thrusters import Allocator
 from uvms_mj.control.base import Command, Controller, ControllerError, Measurement, check_positive, register
-from uvms_mj.rotations import quat_to_mat, rotation_log
+from uvms_mj.rotations import rotation_log
 from uvms_mj.control.station import check_base_reference, check_base_trajectory, check_station_attitude, station_reference
 from uvms_mj.control.station_pid import DEFAULT_T
 
