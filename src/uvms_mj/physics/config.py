@@ -376,12 +376,17 @@ def read_spec(spec: mujoco.MjSpec) -> tuple[WaterParams | None, dict[str, BodyHy
             if water is not None:
                 raise HydroConfigError(f"{WATER_PLUGIN}: more than one instance in the model")
             water = parse_water(dict(p.config))
+    named = {p.name: p for p in spec.plugins if p.name}
     bodies: dict[str, BodyHydro] = {}
     for b in spec.bodies:
         pl = b.plugin
-        # Only touch .config when a plugin is attached (MuJoCo 3.17 crashes otherwise).
+        # Only touch .config when a plugin is attached (MuJoCo 3.17 crashes otherwise); a body
+        # that references a top-level instance by name (<plugin instance="..."/>, or
+        # uvms_mj.plant.robot.add_hydro_instance) has its attributes there (reading the body's own
+        # .config then crashes MuJoCo 3.17's bindings too).
         if pl.active and pl.plugin_name == HYDRO_PLUGIN:
-            bodies[b.name] = parse_body(b.name, dict(pl.config))
+            src = named.get(pl.name) if pl.name else None
+            bodies[b.name] = parse_body(b.name, dict((src if src is not None else pl).config))
     return water, bodies
 
 

@@ -30,7 +30,7 @@ from uvms_mj.plant.errors import ParameterError
 from uvms_mj.plant.params import read_params
 from uvms_mj.physics import model as _pm
 
-__all__ = ["OVERRIDE_FIELDS", "ROLES", "Payload", "apply_model_overrides", "apply_overrides", "compile_robot_spec",
+__all__ = ["OVERRIDE_FIELDS", "ROLES", "Payload", "add_hydro_instance", "apply_model_overrides", "apply_overrides", "compile_robot_spec",
            "factor_of", "resolve_role"]
 
 #: Roles an override key may start with instead of an element name: the vehicle's body, every
@@ -360,6 +360,22 @@ def compile_robot_spec(path: str | Path, overrides: Mapping[str, Any] | None = N
 # --------------------------------------------------------------------------- payload
 
 
+def add_hydro_instance(spec: mujoco.MjSpec, body, name: str, config: dict[str, str]) -> None:
+    """Give a body added to ``spec`` at run time its own ``uvms.hydro`` instance ``name`` with the
+    attributes ``config`` (strings, as in the MJCF), like ``<plugin instance="name"/>`` in a body.
+
+    A MuJoCo 3.17 fact (docs/mujoco-facts.md): assigning ``body.plugin.config`` on a body made by
+    ``add_body`` crashes the Python process; a top-level instance (``spec.add_plugin``) referenced
+    by name from the body compiles and applies its attributes."""
+    p = spec.add_plugin()
+    p.name, p.plugin_name, p.active = name, "uvms.hydro", True
+    p.config = dict(config)
+    body.plugin.name = name
+    body.plugin.plugin_name = "uvms.hydro"
+    body.plugin.active = True
+
+
+
 @dataclass(frozen=True)
 class Payload:
     """A payload picked up during a run: a point mass welded to a site of the robot (the
@@ -397,9 +413,7 @@ class Payload:
         b.inertia = [1e-12, 1e-12, 1e-12]
         b.explicitinertial = True
         if self.volume > 0:
-            b.plugin.plugin_name = "uvms.hydro"
-            b.plugin.active = True
-            b.plugin.config = {"volume": _pm.fmt([self.volume])}
+            add_hydro_instance(spec, b, "payload_hydro", {"volume": _pm.fmt([self.volume])})
 
     def apply(self, m: mujoco.MjModel) -> None:
         """Give the payload body its mass (in the compiled model)."""
