@@ -34,6 +34,7 @@ from uvms_mj.physics import python_backend
 
 ROOT = Path(__file__).resolve().parents[1]
 ROBOTS = {"paper (5 dof)": default_model_path(), "robot3d (10 dof)": ROOT / "tests" / "models" / "robot3d.xml",
+          "bluerov2_heavy (6 dof)": ROOT / "models" / "bluerov2_heavy" / "bluerov2_heavy.xml",
           "bluerov2_alpha (10 dof)": ROOT / "models" / "bluerov2_alpha" / "bluerov2_alpha.xml"}
 
 
@@ -63,12 +64,17 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=10.0, help="simulated seconds per repeat")
     ap.add_argument("--repeats", type=int, default=5)
     ap.add_argument("--rollouts", type=int, default=64)
+    ap.add_argument("--robots", default=None, help="comma-separated name prefixes (e.g. bluerov2_heavy); default: all")
+    ap.add_argument("--no-rollout", action="store_true", help="skip the mujoco.rollout part")
     args = ap.parse_args()
     if not build.register_plugins():
         raise SystemExit(f"the C plugins are unavailable: {build.unavailable_reason()}")
 
     rows = []
+    wanted = [w.strip() for w in args.robots.split(",")] if args.robots else None
     for robot, path in ROBOTS.items():
+        if wanted is not None and not any(robot.startswith(w) for w in wanted):
+            continue
         spec = pm.load_spec(path)
         probe = pm.compile_spec(spec, native=False)
         default = (f"{mujoco.mjtIntegrator(probe.opt.integrator).name.removeprefix('mjINT_')}, "
@@ -108,6 +114,8 @@ def main() -> None:
     for robot, label, what, us, ratio, rtf in rows:
         print(f"{robot:<25}{label:<28}{what:<12}{us:>9.2f}{ratio:>8.2f}{rtf:>8.0f}x")
 
+    if args.no_rollout:
+        return
     # rollout: N runs of 1 s of the 3-D robot from random velocities, 1 vs 2 threads (with no
     # Python mjcb_passive left installed by the python rows above)
     del served, d

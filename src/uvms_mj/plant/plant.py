@@ -103,7 +103,9 @@ class Plant(Stepping):
         terms: which hydrodynamic terms to apply (:class:`HydroTerms`, all on by default;
             ``added_mass="lagged"`` and ``drag="mujoco"`` need a planar robot with the paper's
             parameters).
-        gravity: apply gravity (and therefore buoyancy, which is -rho V g).
+        gravity: apply gravity (and therefore buoyancy, which is -rho V g): True the model's
+            (``<option gravity>``), False none, or 3 numbers: that gravity [m/s^2, world] (e.g. a
+            robot's source's local value).
         current: the water current: 2 or 3 numbers (uniform, world frame, m/s) or a
             :class:`~uvms_mj.physics.current.Current` (Gauss-Markov, depth profile); default:
             the model's.
@@ -138,7 +140,7 @@ class Plant(Stepping):
         *,
         overrides: Mapping[str, Any] | None = None,
         terms: HydroTerms = HydroTerms(),
-        gravity: bool = True,
+        gravity: bool | Sequence[float] = True,
         current: Sequence[float] | Current | None = None,
         waves: Waves | None = None,
         dead_zone: bool | Sequence[float] = False,
@@ -180,8 +182,13 @@ class Plant(Stepping):
                                      "drag strip|off (lagged and mujoco are the paper's planar robot's)")
             if overrides:
                 apply_model_overrides(spec, overrides)
-            if not gravity:
+            if gravity is False:
                 spec.option.gravity = [0.0, 0.0, 0.0]
+            elif gravity is not True:
+                g = np.asarray(gravity, dtype=float).ravel()
+                if g.shape != (3,) or not np.all(np.isfinite(g)):
+                    raise ParameterError(f"gravity = {gravity!r}: give true, false or 3 finite numbers [m/s^2, world]")
+                spec.option.gravity = g
             if current is not None:
                 _pm.set_water(spec, **water)
                 spec.option.wind = wind  # MuJoCo's own fluid model (drag="mujoco") sees it too

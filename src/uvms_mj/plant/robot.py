@@ -173,11 +173,16 @@ def _thrusters_role(spec: mujoco.MjSpec, key: str, value: Any) -> None:
             a.forcelimited = mujoco.mjtLimited.mjLIMITED_TRUE
             continue
         inst = instances.get(a.plugin.name) if a.plugin.name else None
+        own = inst is None and a.plugin.active and a.plugin.plugin_name == "uvms.thruster"
+        if (inst is not None or own) and fld == "tau":
+            # uvms.thruster: tau = 0 is a static thrust (no lag state: actdim 0), tau > 0 a lag
+            # state (actdim 1) -- the plugin refuses any other pairing
+            a.actdim = 0 if v[0] == 0 else 1
         if inst is not None:
             if inst.name not in done:
                 inst.config = {**inst.config, fld: _pm.fmt(v)}
                 done.add(inst.name)
-        elif a.plugin.active and a.plugin.plugin_name == "uvms.thruster":
+        elif own:
             a.plugin.config = {**a.plugin.config, fld: _pm.fmt(v)}
         elif fld == "tau" and a.dyntype == mujoco.mjtDyn.mjDYN_FILTER:
             prm = list(a.dynprm)

@@ -198,6 +198,11 @@ class PhysicsSection(_Section):
         None, description="MuJoCo integrator")
     backend: Literal["auto", "native", "python"] = Field(
         "auto", description="hydrodynamics backend; auto: native if it builds ($UVMS_MJ_COMPILED=off: python)")
+    gravity: list[Annotated[float, Field(ge=-100.0, le=100.0)]] | None = Field(
+        None, min_length=3, max_length=3,
+        description="the plant's gravity [m/s^2, world]; null: the model file's (e.g. [0, 0, -9.82]: "
+        "von Benzon et al.'s BlueROV2 simulator); the nominal model keeps its file's; plant.gravity: false "
+        "still switches gravity off")
 
 
 class Hydro(_Section):

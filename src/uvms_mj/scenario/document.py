@@ -23,9 +23,10 @@ A null default is the robot's own, filled in when the scenario is validated (``u
     duration: null              # [s]; null: 40 on the paper's robot (its experiment), 20 on others
     seed: 0                     # random seed (sensor noise, Gauss-Markov current)
     physics:
-      timestep: null            # plant step [s]; null: the model's (paper 1/120 s, BlueROV2 2 ms)
+      timestep: null            # plant step [s]; null: the model's (paper 1/120 s, bluerov2_heavy 5 ms, bluerov2_alpha 4 ms)
       integrator: null          # euler | rk4 | implicit | implicitfast; null: the model's
       backend: auto             # auto (native if it builds; $UVMS_MJ_COMPILED=off: python) | native | python
+      gravity: null             # the plant's gravity [m/s^2, world], e.g. [0, 0, -9.82]; null: the model's
     plant:                      # the truth
       model_mismatch: null      # paper's robot: experiment.truth_overrides() + MuJoCo drag (null: true)
       overrides: {}             # '<element>.<field>': value or factor 'x1.3'; the vehicle role

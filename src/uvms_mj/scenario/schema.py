@@ -438,7 +438,7 @@ def build(scenario: Scenario) -> tuple[Plant, Any]:
             robot_path(sc.robot, sc.base_dir),
             overrides=plant_overrides(sc),
             terms=HydroTerms(added_mass=pl.hydro.added_mass, drag=drag_model(sc), buoyancy=pl.hydro.buoyancy),
-            gravity=pl.gravity,
+            gravity=pl.gravity if not pl.gravity or ph.gravity is None else tuple(ph.gravity),
             current=(sc.current.current(sc.seed) if sc.current is not None
                      else tuple(pl.current) if pl.current is not None else None),
             waves=sc.waves.waves(sc.seed) if sc.waves is not None else None,
