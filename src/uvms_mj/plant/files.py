@@ -52,7 +52,10 @@ def robot_path(robot: str | Path, base_dir: str | Path | None = None) -> Path:
     key = str(robot)
     if key in BUILTIN_ROBOTS:
         return models_dir() / BUILTIN_ROBOTS[key]
-    p = Path(key).expanduser()
+    try:
+        p = Path(key).expanduser()
+    except RuntimeError as exc:  # '~nosuchuser/...': no such user's home
+        raise ParameterError(f"robot = {key!r}: cannot expand '~' ({exc}); give the file's path") from None
     cands = [p] if p.is_absolute() else ([Path(base_dir) / p] if base_dir is not None else []) + [p]
     for c in cands:
         if c.is_file():

@@ -85,10 +85,21 @@ def _elements(spec: mujoco.MjSpec) -> dict[str, list[str]]:
     }
 
 
+#: The largest magnitude an override value may have (ours: 1e9 in SI units -- beyond any mass,
+#: inertia, damping or force of an underwater robot; 1e308 passed validation and then made the
+#: first step non-finite).
+OVERRIDE_MAX = 1e9
+
+
 def _numbers(key: str, value: Any, n: int | None, what: str) -> np.ndarray:
-    arr = np.atleast_1d(np.asarray(value, dtype=float)) if not isinstance(value, (str, bool)) else None
+    try:
+        arr = np.atleast_1d(np.asarray(value, dtype=float)) if not isinstance(value, (str, bool, dict)) else None
+    except (TypeError, ValueError, OverflowError):
+        arr = None
     if arr is None or arr.ndim != 1 or not np.all(np.isfinite(arr)):
         raise ParameterError(f"{key} = {value!r}: expected {what}")
+    if np.any(np.abs(arr) > OVERRIDE_MAX):
+        raise ParameterError(f"{key} = {value!r}: |value| must be <= {OVERRIDE_MAX:g} ({what})")
     if n is not None and n > 0 and arr.size != n:
         raise ParameterError(f"{key} = {value!r}: expected {n} number{'s' if n > 1 else ''} ({what})")
     if n == -1 and arr.size not in (6, 21, 36):

@@ -96,6 +96,7 @@ from uvms_mj.scenario.base import (
     PERIOD_RANGE,
     SEED_MAX,
     SIZE_MIN,
+    TIMESTEP_RANGE,
     ControllerSection,
     NominalSection,
     Outputs,
@@ -351,6 +352,10 @@ class Scenario(_Section):
         _, m, _ = robot_model(self.robot, self.base_dir)
         ph = self.physics
         if ph.timestep is None:
+            lo, hi = TIMESTEP_RANGE
+            if not lo <= float(m.opt.timestep) <= hi:  # the model file's <option timestep>
+                _raise([(("physics", "timestep"), f"the robot file's <option timestep> = {float(m.opt.timestep):g} s "
+                         f"is outside [{lo:g}, {hi:g}] s; give physics.timestep or fix the file", _NO_VALUE)])
             ph.timestep = float(m.opt.timestep)
         if ph.integrator is None:
             ph.integrator = mujoco.mjtIntegrator(m.opt.integrator).name.removeprefix("mjINT_").lower()

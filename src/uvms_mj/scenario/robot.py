@@ -94,6 +94,11 @@ def mjcf_thrusters_issues(th, path: Path) -> list:
     return issues
 
 
+#: The largest overrides file read [bytes] (ours: 1 MB, thousands of overrides; `identify` writes a
+#: few hundred bytes): a bigger file is refused rather than parsed.
+OVERRIDES_FILE_MAX = 1_000_000
+
+
 def read_overrides_file(path: str, base_dir: str | None) -> dict:
     """The overrides of a YAML file (a mapping of "<element>.<field>" to values).
 
@@ -102,10 +107,20 @@ def read_overrides_file(path: str, base_dir: str | None) -> dict:
     """
     import yaml
 
-    p = Path(path).expanduser()
+    try:
+        p = Path(path).expanduser()
+    except RuntimeError as exc:
+        raise ParameterError(f"{path}: cannot expand '~' ({exc})") from None
     if not p.is_absolute() and base_dir is not None:
         p = Path(base_dir) / p
     try:
+        st = p.stat()
+        if p.is_dir():
+            raise ParameterError(f"{path}: is a folder; an overrides file is a YAML file")
+        if not p.is_file():  # a FIFO, a device (/dev/zero): reading could never end
+            raise ParameterError(f"{path}: not a regular file; an overrides file is a YAML file")
+        if st.st_size > OVERRIDES_FILE_MAX:
+            raise ParameterError(f"{path}: {st.st_size} bytes; an overrides file is at most {OVERRIDES_FILE_MAX} bytes")
         data = yaml.safe_load(p.read_text())
     except FileNotFoundError:
         raise ParameterError(f"{path}: no such overrides file") from None

@@ -196,7 +196,7 @@ class PayloadSection(_Section):
 
     mass: float = Field(gt=0, le=1000.0, description="[kg]")
     t: float = Field(0.0, ge=0, le=DURATION_MAX, description="pick-up time [s]")
-    site: str | None = Field(None, description="site it is welded to; null: the tip site")
+    site: str | None = Field(None, min_length=1, description="site it is welded to; null: the tip site")
     offset: Annotated[list[float], Field(min_length=3, max_length=3)] = Field(
         default_factory=lambda: [0.0, 0.0, 0.0], description="centre in the site frame [m]")
     radius: float = Field(0.02, gt=0, le=1.0, description="for its inertia (solid sphere) [m]")
