@@ -10,6 +10,9 @@ from pathlib import Path
 
 import pytest
 
+from uvms_mj.scenario.base import ScenarioError
+from uvms_mj.scenario.schema import load_scenario
+
 ROOT = Path(__file__).resolve().parents[1]
 HEAVY = ROOT / "models" / "bluerov2_heavy" / "bluerov2_heavy.xml"
 
@@ -27,7 +30,34 @@ def _model_with_timestep(tmp_path: Path, value: str) -> Path:
     return out
 
 
+def _edited_heavy(tmp_path: Path, file: str, old: str, new: str, regex: bool = False) -> Path:
+    """A copy of the BlueROV2 Heavy's files with one edit in ``file``."""
+    import re
+
+    for f in HEAVY.parent.glob("bluerov2_heavy*.xml"):
+        text = f.read_text()
+        if f.name == file:
+            edited = re.sub(old, new, text, flags=re.S) if regex else text.replace(old, new)
+            assert edited != text, "the edit matched nothing"
+            text = edited
+        (tmp_path / f.name).write_text(text)
+    return tmp_path / "bluerov2_heavy.xml"
+
+
 CASES = {
+    "empty thrust curve": (lambda t: "robot: " + str(_edited_heavy(
+        t, "bluerov2_heavy_defs.xml", 'value="poly 0 8.9 0 176.0 0 -404.1 0 389.9 0 -140.3"', 'value=""')) + "\n",
+        "attribute 'curve' = ''"),
+    "short keyframe": (lambda t: "robot: " + str(_edited_heavy(
+        t, "bluerov2_heavy.xml", "</worldbody>", '</worldbody>\n  <keyframe><key name="k" qpos="0 0 0"/></keyframe>'))
+        + "\n", "keyframe 'k': qpos has 3 values; the model needs 7"),
+    "hydro on the world body": (lambda t: "robot: " + str(_edited_heavy(
+        t, "bluerov2_heavy.xml", "<worldbody>",
+        '<worldbody>\n    <plugin plugin="uvms.hydro"><config key="volume" value="0.01"/></plugin>')) + "\n",
+        "uvms.hydro on the world body"),
+    "no thrusters": (lambda t: "robot: " + str(_edited_heavy(
+        t, "bluerov2_heavy_defs.xml", r"<actuator>.*?</actuator>", "", regex=True)) + "\n",
+        "drives no actuator"),
     "timestep 0": (lambda t: f"robot: {_model_with_timestep(t, '0')}\n", "<option timestep> = 0 s is outside"),
     "timestep 1e-9": (lambda t: f"robot: {_model_with_timestep(t, '1e-9')}\n", "<option timestep> = 1e-09 s is outside"),
     "no such user": (lambda t: "robot: '~nosuchuser_uvms/x.xml'\n", "robot: "),
@@ -46,14 +76,25 @@ CASES = {
 
 
 @pytest.mark.parametrize("case", list(CASES))
-def test_validate_refuses_in_one_line(tmp_path, case):
+def test_the_scenario_is_refused_in_one_line(tmp_path, case):
+    """In process: a ScenarioError (what the CLI prints as its one "Error:" line, exit 2) naming
+    the problem, no other exception."""
     make, expected = CASES[case]
+    f = tmp_path / "s.yaml"
+    f.write_text(make(tmp_path) + "duration: 0.1\n")
+    with pytest.raises(ScenarioError) as exc:
+        load_scenario(f)
+    msg = str(exc.value)
+    assert expected in msg and "\n" not in msg.strip(), msg
+
+
+def test_validate_exits_2_with_one_line(tmp_path):
+    """The CLI's contract on one of the cases: exit 2, one "Error:" line, no traceback."""
+    make, expected = CASES["overrides file /dev/zero"]
     f = tmp_path / "s.yaml"
     f.write_text(make(tmp_path) + "duration: 0.1\n")
     r = subprocess.run([sys.executable, "-m", "uvms_mj.cli.main", "validate", str(f)], capture_output=True,
                        text=True, timeout=120)
     assert r.returncode == 2, (r.stdout, r.stderr)
-    assert "Traceback" not in r.stderr
-    assert expected in r.stderr, r.stderr
-    error_lines = [ln for ln in r.stderr.splitlines() if ln.startswith("Error:")]
-    assert len(error_lines) == 1
+    assert "Traceback" not in r.stderr and expected in r.stderr, r.stderr
+    assert len([ln for ln in r.stderr.splitlines() if ln.startswith("Error:")]) == 1

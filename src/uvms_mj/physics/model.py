@@ -174,7 +174,8 @@ def uses_plugins(spec: mujoco.MjSpec) -> bool:
     return any(p.plugin_name in PLUGINS for p in spec.plugins) or bool(_texts(spec))
 
 
-def compile_spec(spec: mujoco.MjSpec, *, native: bool | None = None, source: str = "model") -> mujoco.MjModel:
+def compile_spec(spec: mujoco.MjSpec, *, native: bool | None = None, source: str = "model",
+                 check_keyframes: bool = True) -> mujoco.MjModel:
     """Validate the uvms plugin parameters of ``spec`` and compile it.
 
     Args:
@@ -182,6 +183,9 @@ def compile_spec(spec: mujoco.MjSpec, *, native: bool | None = None, source: str
         native: compile the C plugins into the model (True), strip them for the Python backend
             (False), or: C when the plugin library is available, else Python (None).
         source: how to name the model in error messages (e.g. its file name).
+        check_keyframes: refuse a keyframe whose qpos / qvel / act / ctrl is neither empty nor of
+            the model's size (the file as written; False for a spec that gained joints at run
+            time, whose keyframes MuJoCo pads with qpos0).
 
     Raises:
         ModelError: a bad hydrodynamic parameter (the message names the body, the attribute,
@@ -195,9 +199,17 @@ def compile_spec(spec: mujoco.MjSpec, *, native: bool | None = None, source: str
         raise ModelError(f"{source}: bodies carry uvms.hydro parameters but the model declares no "
                          "uvms.water instance (add <extension><plugin plugin=\"uvms.water\"><instance name=\"water\"/>"
                          "</plugin></extension>)")
+    for p in spec.plugins:  # top-level instances (reading them is safe; see config.read_spec)
+        if p.plugin_name in PLUGINS:
+            empty = sorted(k for k, v in dict(p.config).items() if not str(v).strip())
+            if empty:
+                raise ModelError(f"{source}: {p.plugin_name} instance {p.name!r}: attribute {empty[0]!r} = '': give a "
+                                 "value or leave the attribute out (its default)")
     if native is None:
         native = plugins_available() or not uses_plugins(spec)
     stripped = bool(_texts(spec))
+    # the keyframes' sizes as written (compiling pads the spec's own arrays)
+    key_sizes = [(k.name, {f: len(getattr(k, f)) for f in ("qpos", "qvel", "act", "ctrl")}) for k in spec.keys]
     if native and uses_plugins(spec) and (stripped or not plugins_available()):
         raise ModelError(f"{source}: the uvms plugins are not available: {build.unavailable_reason()}")
     try:
@@ -219,9 +231,18 @@ def compile_spec(spec: mujoco.MjSpec, *, native: bool | None = None, source: str
         raise
     except Exception as exc:  # noqa: BLE001
         raise ModelError(f"cannot compile {source}: {exc}") from None
+    if check_keyframes:
+        for name, given in key_sizes:  # MuJoCo pads a short keyframe with qpos0 without a word
+            for fld, size in (("qpos", m.nq), ("qvel", m.nv), ("act", m.na), ("ctrl", m.nu)):
+                if given[fld] not in (0, size):
+                    raise ModelError(f"{source}: keyframe {name!r}: {fld} has {given[fld]} values; the model "
+                                     f"needs {size}")
     resolved = {}
     for name, bh in bodies.items():
         bid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name)
+        if bid == 0:
+            raise ModelError(f"{source}: uvms.hydro on the world body: the world does not move; put it on the "
+                             "body that displaces the water")
         if bid < 0:
             raise ModelError(f"{source}: uvms.hydro parameters for body {name!r}, which the model does not have")
         if m.body_simple[bid] and any(bh.added_mass.ravel()):
