@@ -18,6 +18,7 @@ geoms, or a flat seabed ``plant.seabed_depth`` [m] below the surface (world z = 
 
 from __future__ import annotations
 
+import re
 from typing import Annotated
 
 import mujoco
@@ -161,11 +162,11 @@ def navigation_issues(sc, m: mujoco.MjModel, dt: float) -> list:
         try:
             cfg = _config(kind, sec)
         except ValueError as exc:
-            msg = str(exc)
-            head, _, rest = msg.partition(" = ")
-            key = head.removeprefix(f"navigation.{kind}.") if head.startswith(f"navigation.{kind}.") else None
-            issues.append((("navigation", kind) + ((key,) if key and "." not in key and " " not in key else ()),
-                           msg, _NO_VALUE))
+            rest = str(exc).removeprefix(f"navigation.{kind}")
+            key = re.match(r"\.(\w+)", rest)
+            if key:
+                rest = rest[key.end():]
+            issues.append((("navigation", kind) + ((key.group(1),) if key else ()), rest.lstrip(":= "), _NO_VALUE))
             continue
         try:
             _site_of(kind, cfg, sites)
