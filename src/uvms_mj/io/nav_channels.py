@@ -186,7 +186,8 @@ def read_navigation(path: str | Path):
     except Exception:  # noqa: BLE001 - a log without a readable status record: no mounts
         nav = {}
     for kind, m in nav.items():
-        rec.mounts[kind] = Mount(position=np.asarray(m["position"], dtype=float), quat=np.asarray(m["quat"], dtype=float))
+        rec.mounts[kind] = Mount(position=np.asarray(m["position"], dtype=float),
+                                 quat=np.asarray(m["quat"], dtype=float))
         rec.sites[kind] = m["site"]
     return rec
 

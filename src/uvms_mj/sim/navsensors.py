@@ -136,9 +136,10 @@ class ImuConfig:
 
 @dataclass(frozen=True)
 class DvlConfig:
-    """The DVL (module docstring). Defaults: a Water Linked DVL A50-class DVL (datasheet: 4
-    beams at 22.5 deg, altitude 0.05-50 m, velocity resolution 0.1 mm/s, 2-15 Hz); 5 Hz, 0.05 s
-    latency, 5 mm/s noise per beam (about 1 cm/s horizontally) [A]."""
+    """The DVL (module docstring). Defaults: a Water Linked DVL A50-class DVL (Water Linked's
+    specifications: 4 beams (Janus, 22.5 deg from the boresight), altitude 0.05-50 m, ping rate
+    4-26 Hz with the altitude, 5-6 Hz at 1.5-14 m); 5 Hz, 0.05 s latency, 5 mm/s noise per beam
+    (about 1 cm/s horizontally), 0.1 mm/s output resolution [A]."""
 
     site: str | None = None
     rate: float = 5.0
@@ -204,8 +205,8 @@ class DepthConfig:
 @dataclass(frozen=True)
 class FixConfig:
     """Position fixes (module docstring). Defaults: a USBL of the Water Linked Underwater GPS
-    class: 1 Hz, 0.3 s latency, 1 % of the slant range [brief: 1-2 Hz, 0.2-0.5 s, ~1 %]; a 2 cm
-    floor, 2 % outliers of 1 m, 300 m range [A]."""
+    class: 1 Hz, 0.3 s latency, 1 % of the slant range (issue 21's figures for a USBL: 1-2 Hz,
+    0.2-0.5 s, ~1 %, outliers); a 2 cm floor, 2 % outliers of 1 m std, 300 m range [A]."""
 
     site: str | None = None
     rate: float = 1.0
