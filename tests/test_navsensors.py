@@ -190,12 +190,16 @@ def test_depth_is_minus_z_of_the_site_within_the_resolution(box):
     assert nav.record.depth[-1].depth == pytest.approx(truth * 1000.0 / 1025.0, rel=TOL)
 
 
-def test_fix_rate_latency_position_and_yaw(box):
+@pytest.mark.parametrize("integrator", ["implicitfast", "rk4", "euler"])
+def test_fix_rate_latency_position_and_yaw(box, integrator):
+    """Also the time of a sample: MuJoCo's sensors hold the state at the start of the last step
+    with every integrator, so a sample of step s, read after step s + 1, is the state at s dt."""
     cfg = NavigationConfig(fix=FixConfig(noise=0, range_noise=0, outlier_probability=0, yaw=True, rate=2.0,
                                          latency=0.25))
     v = np.array([0.2, -0.1, 0.05])  # no gravity, no forces: constant velocity, so p(t) = p0 + v t
-    plant, nav = _plant(box, cfg, gravity=False, initial=InitialState(position=(0, 0, -2), linear_velocity=tuple(v),
-                                                                     quat=tuple(quat_from_rpy(0, 0, 0.6))))
+    plant, nav = _plant(box, cfg, gravity=False, integrator=integrator,
+                        initial=InitialState(position=(0, 0, -2), linear_velocity=tuple(v),
+                                             quat=tuple(quat_from_rpy(0, 0, 0.6))))
     nav.advance(plant.step_observe, 800)  # 3.2 s
     fixes = nav.record.fix
     assert [f.t for f in fixes] == pytest.approx([0.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0])

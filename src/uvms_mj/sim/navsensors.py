@@ -42,7 +42,8 @@ the values of step ``s`` are read after the step ``s -> s + 1`` (:meth:`Navigati
 splits the control period's steps there): the state and the acceleration under the command in
 force from ``s dt`` on. Each sample has its measurement time ``t = s dt`` and its arrival time
 ``t + latency``. ``outages``: [start, end) windows of measurement time without samples (the DVL:
-dropout samples).
+dropout samples). A sample due at the run's last step is not taken (the run does not step past
+it).
 
 Random streams: each sensor draws from its own ``numpy.random.default_rng([seed, NAV_STREAM,
 i])``, ``i`` its index in :data:`NAV_SENSORS`, in a fixed order per sample: deterministic per
