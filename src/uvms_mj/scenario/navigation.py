@@ -26,7 +26,7 @@ from pydantic import Field
 
 from uvms_mj.scenario.base import _NO_VALUE, DURATION_MAX, _Section
 
-__all__ = ["NavigationSection", "nav_config", "navigation_issues"]
+__all__ = ["NavigationSection", "nav_config", "navigation_issues", "resolved_navigation"]
 
 Rate = Annotated[float, Field(gt=0, le=10_000.0, description="sample rate [Hz]: its period a whole number of "
                                                                "physics.timestep")]
@@ -133,6 +133,40 @@ def nav_config(sc):
         return None
     parts = {k: _config(k, getattr(nav, k)) for k in NAV_SENSORS if nav is not None and getattr(nav, k) is not None}
     return NavigationConfig(**parts, seabed_depth=seabed)
+
+
+def resolved_navigation(sc) -> dict:
+    """The navigation section with every null of a given sensor filled in: the sensor's default
+    (the DVL's beam angles in deg) and its default site on the robot's model."""
+    import dataclasses
+    import math
+
+    from uvms_mj.scenario.document import robot_model
+    from uvms_mj.sim.navsensors import NAV_SENSORS, _site_of
+
+    _, m, _ = robot_model(sc.robot, sc.base_dir)
+    sites = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_SITE, i) or "" for i in range(m.nsite)]
+    out: dict = {}
+    for kind in NAV_SENSORS:
+        sec = getattr(sc.navigation, kind)
+        if sec is None:
+            out[kind] = None
+            continue
+        cfg = _config(kind, sec)
+        full = {f.name: getattr(cfg, f.name) for f in dataclasses.fields(cfg)}
+        full["site"] = _site_of(kind, cfg, sites)
+        if kind == "dvl":
+            full["beam_angle_deg"] = math.degrees(full.pop("beam_angle"))
+            full["beam_azimuths_deg"] = [math.degrees(a) for a in full.pop("beam_azimuths")]
+        given = sec.model_dump(mode="json")
+        out[kind] = {k: (v if v is not None else _plain(full[k])) for k, v in given.items()}
+    return out
+
+
+def _plain(v):
+    if isinstance(v, (tuple, list)):
+        return [_plain(x) for x in v]
+    return v
 
 
 def navigation_issues(sc, m: mujoco.MjModel, dt: float) -> list:

@@ -42,7 +42,7 @@ from uvms_mj.plant.layout import InitialState
 from uvms_mj.plant.plant import Plant
 from uvms_mj.scenario.paths import tip_path
 from uvms_mj.scenario.sections import vehicle_params
-from uvms_mj.scenario.navigation import nav_config
+from uvms_mj.scenario.navigation import nav_config, resolved_navigation
 from uvms_mj.sim.navsensors import add_to_spec
 from uvms_mj.scenario.base import (  # noqa: F401  (LAG_STABILITY, log_path, sensor_model: importable from here as before)
     _NO_VALUE,
@@ -423,6 +423,8 @@ def resolved(scenario: Scenario) -> dict:
         params["T"] = T
     d["control_period"] = T
     d["controller"]["params"] = _jsonable(params)
+    if d.get("navigation") is not None:
+        d["navigation"] = resolved_navigation(scenario)
     return _jsonable(d)
 
 
