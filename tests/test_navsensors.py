@@ -51,7 +51,7 @@ BOX = """<mujoco model="nav_box">
 </mujoco>
 """
 
-QUIET_IMU = ImuConfig(gyro_noise=0, gyro_bias_walk=0, accel_noise=0, accel_bias_walk=0)
+QUIET_IMU = ImuConfig(gyro_noise=0, gyro_bias_walk=0, accel_noise=0, accel_bias_walk=0, rate=125.0)
 QUIET_DVL = DvlConfig(beam_noise=0, resolution=0, latency=0.05)
 QUIET_FIX = FixConfig(noise=0, range_noise=0, outlier_probability=0, yaw=True)
 
@@ -283,14 +283,14 @@ def test_scenario_run_logs_the_channels_and_leaves_the_physics_alone(tmp_path):
     from uvms_mj.io.writer import McapRecorder
     from uvms_mj.scenario.schema import build, run_scenario
 
-    sc = _scenario(navigation={"imu": {}, "dvl": {}, "depth": {}, "fix": {"yaw": True}})
+    sc = _scenario(navigation={"imu": {}, "dvl": {}, "depth": {}, "fix": {"yaw": True}})  # the IMU at every step
     plant, ctrl = build(sc)
     log = tmp_path / "nav.mcap"
     with McapRecorder(log, None, {}, model=plant.model) as rec:
         res = run_scenario(sc, sink=rec.write_sample, nav_sink=rec.write_navigation, built=(plant, ctrl))
         rec.close(res.status, res.reason, meta=res.meta)
     nav = res.navigation
-    assert len(nav.imu) == 125 and len(nav.dvl) == 5 and len(nav.depth) == 25 and len(nav.fix) == 1
+    assert len(nav.imu) == 250 and len(nav.dvl) == 5 and len(nav.depth) == 25 and len(nav.fix) == 1
     assert nav.sites == {"imu": "bluerov2_imu", "dvl": "bluerov2_dvl", "depth": "bluerov2_depth",
                          "fix": "bluerov2_usbl"}
     back = read_navigation(log)

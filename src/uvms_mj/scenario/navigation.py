@@ -10,7 +10,7 @@ geoms, or a flat seabed ``plant.seabed_depth`` [m] below the surface (world z = 
 
     plant: {seabed_depth: 20}          # a seabed plane at world z = -20 m
     navigation:
-      imu: {}                          # ICM-20602-class MEMS IMU at the site *imu, 125 Hz
+      imu: {}                          # ICM-20602-class MEMS IMU at the site *imu, every plant step
       dvl: {rate: 5, max_altitude: 50} # A50-class DVL at *dvl: 4 beams, Janus, 22.5 deg
       depth: {}                        # Bar30-class pressure sensor at *depth
       fix: {rate: 1, latency: 0.3}     # USBL at *usbl: 1 % of the slant range, outliers
@@ -29,7 +29,8 @@ from uvms_mj.scenario.base import _NO_VALUE, DURATION_MAX, _Section
 __all__ = ["NavigationSection", "nav_config", "navigation_issues", "resolved_navigation"]
 
 Rate = Annotated[float, Field(gt=0, le=10_000.0, description="sample rate [Hz]: its period a whole number of "
-                                                               "physics.timestep")]
+                                                               "physics.timestep; null: the sensor's default "
+                                                               "(the IMU's: every plant step)")]
 Latency = Annotated[float, Field(ge=0, le=100.0, description="arrival time - measurement time [s]")]
 Outage = Annotated[list[Annotated[float, Field(ge=0, le=DURATION_MAX)]], Field(min_length=2, max_length=2)]
 Vec = Annotated[list[Annotated[float, Field(ge=-1e3, le=1e3)]], Field(min_length=3, max_length=3)]

@@ -111,10 +111,11 @@ def _check(cfg, nonneg: Sequence[str] = (), positive: Sequence[str] = ()) -> Non
 class ImuConfig:
     """The IMU (module docstring). Defaults: a TDK ICM-20602-class MEMS IMU (datasheet noise
     densities 0.004 deg/s/sqrt(Hz), 100 ug/sqrt(Hz); full scales 2000 deg/s, 16 g); bias random
-    walks of the EuRoC dataset's ADIS16448 calibration [A: that datasheet gives none]; 125 Hz [A]."""
+    walks of the EuRoC dataset's ADIS16448 calibration [A: that datasheet gives none]; every plant
+    step (``rate`` None: 250 Hz at 4 ms, 150 Hz at 1/150 s; such an IMU samples at up to 8 kHz) [A]."""
 
     site: str | None = None
-    rate: float = 125.0  # [Hz]
+    rate: float | None = None  # [Hz]; None: every plant step
     latency: float = 0.0  # [s]
     gyro_noise: float = 0.004 * DEG  # ARW [rad/s/sqrt(Hz)]
     gyro_bias_walk: float = 1.9393e-5  # [rad/s^2/sqrt(Hz)]
@@ -130,7 +131,7 @@ class ImuConfig:
 
     def __post_init__(self) -> None:
         _check(self, ("latency", "gyro_noise", "gyro_bias_walk", "gyro_bias_std", "accel_noise", "accel_bias_walk",
-                      "accel_bias_std"), ("rate", "gyro_range", "accel_range"))
+                      "accel_bias_std"), ("gyro_range", "accel_range") + (("rate",) if self.rate is not None else ()))
         object.__setattr__(self, "gyro_bias", _vec3("navigation.imu.gyro_bias", self.gyro_bias))
         object.__setattr__(self, "accel_bias", _vec3("navigation.imu.accel_bias", self.accel_bias))
 
@@ -455,7 +456,7 @@ class NavigationSuite:
 
     def _imu(self, t: float, c: ImuConfig, _out: bool) -> None:
         sd, a, rng = self.data.sensordata, self.adr["imu"], self.rngs["imu"]
-        rate = c.rate
+        rate = c.rate or 1.0 / self.dt
         acc = sd[a["acc"]:a["acc"] + 3] + self.b_a
         gyro = sd[a["gyro"]:a["gyro"] + 3] + self.b_g
         if c.gyro_noise:
@@ -550,12 +551,14 @@ class NavigationSuite:
         self._emit("fix", FixSample(t=t, t_arrival=t + c.latency, position=pos, yaw=yaw), outlier=outlier)
 
 
-def steps_of(kind: str, rate: float, dt: float) -> int:
-    """A sensor's period in plant steps of ``dt`` [s].
+def steps_of(kind: str, rate: float | None, dt: float) -> int:
+    """A sensor's period in plant steps of ``dt`` [s] (``rate`` None: every step).
 
     Raises:
         ValueError: a period that is not a whole number (>= 1) of steps; the message names the
             rates allowed."""
+    if rate is None:
+        return 1
     x = 1.0 / (rate * dt)
     n = round(x)
     if n < 1 or abs(x - n) > 1e-9 * max(1.0, x):
