@@ -39,7 +39,7 @@ def _run_one(scenario, out: Path, progress: bool = True, source: str | None = No
                 McapRecorder(out, plant.params, meta, **rec_kw) as rec:
             try:
                 res = run_scenario(scenario, sink=rec.write_sample, on_sample=tick if progress else None,
-                                   built=(plant, ctrl))
+                                   built=(plant, ctrl), nav_sink=rec.write_navigation)
             except KeyboardInterrupt as exc:
                 rec.close(status="interrupted", reason=str(exc) or "interrupted (Ctrl-C)")
                 click.echo(f"interrupted; partial log closed cleanly: {out}", err=True)

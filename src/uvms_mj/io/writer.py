@@ -24,6 +24,7 @@ from uvms_mj.io.encoding import (_IDENTITY, _NUMPY, _PAPER_PATHS, _TF_KEYS, _ZER
                                  _sample_body, _stamp, _tf_template)
 from uvms_mj.io.interrupts import _CRITICAL, _critical
 from uvms_mj.io.mcap_writer import LeanWriter
+from uvms_mj.io.nav_channels import NavigationChannels
 from uvms_mj.io.paths import _open_locked
 from uvms_mj.io.provenance import _version, provenance
 from uvms_mj.io.robot_channels import _RobotChannels, _tip_site_of
@@ -36,7 +37,7 @@ if TYPE_CHECKING:
     import mujoco
 
 
-class McapRecorder:
+class McapRecorder(NavigationChannels):
     """Writes a run to an MCAP file as it happens (the layout: :mod:`uvms_mj.io.recorder`).
 
     Args:
@@ -286,6 +287,7 @@ class McapRecorder:
 
     def _write_pending(self) -> None:
         """Encode and write the samples kept since the last flush, in order (with the paths)."""
+        self._write_navigation()  # the navigation samples since the last flush (uvms_mj.io.nav_channels)
         rows, self._pending = self._pending, []
         if not rows:
             return

@@ -126,6 +126,8 @@ class Plant(Stepping):
             ``added_mass="lagged"`` always runs in Python. :attr:`backend` tells which one is in use.
         payload: a payload picked up during the run (:class:`~uvms_mj.plant.robot.Payload`).
         failures: thrusters failing during the run (:class:`ThrusterFailure`).
+        spec_edits: callables applied to the model's MjSpec before it is compiled, after the
+            overrides (e.g. :func:`uvms_mj.sim.navsensors.add_to_spec`: MuJoCo sensors, a seabed).
 
     Raises:
         ParameterError: missing file, missing element, a non-physical parameter or an
@@ -152,6 +154,7 @@ class Plant(Stepping):
         backend: str | None = None,
         payload: Payload | None = None,
         failures: Sequence[ThrusterFailure] = (),
+        spec_edits: Sequence[Any] = (),
     ) -> None:
         install_mujoco_warning_handler()
         path = default_model_path() if model is None else robot_path(model)
@@ -203,6 +206,8 @@ class Plant(Stepping):
                 if site is None:
                     raise ParameterError("payload: the robot has no tip site; give payload.site")
                 payload.add_to(spec, site)
+            for edit in spec_edits:
+                edit(spec)
             self.model = _pm.compile_spec(spec, native=native, source=path.name)
         except _pm.ModelError as exc:
             raise ParameterError(str(exc)) from None

@@ -49,6 +49,8 @@ A null default is the robot's own, filled in when the scenario is validated (``u
       gravity: true
     initial: {}                 # pose, joints by name, velocities (null: the model's keyframe)
     sensors: {}                 # flat fields, or per signal: position / attitude / joints / velocity
+    navigation: null            # {imu, dvl, depth, fix}: navigation sensors on sites (MJCF robots;
+                                #   uvms_mj.scenario.navigation); logged, not fed to the controller
     vehicle:                    # the vehicle's setpoint or trajectory (controller's base reference)
       setpoint: null
       trajectory: null
@@ -123,6 +125,7 @@ from uvms_mj.scenario.paper import (
     paper_plant_issues,
     paper_thrusters_issues,
 )
+from uvms_mj.scenario.navigation import NavigationSection, navigation_issues
 from uvms_mj.scenario.paths import Arm, TrajectorySection, tip_path
 from uvms_mj.scenario.robot import mjcf_nominal_issues, mjcf_plant_issues, mjcf_thrusters_issues
 from uvms_mj.scenario.sections import (CurrentSection, Initial, PlantSection, ThrustersSection, Vehicle, WavesSection,
@@ -253,6 +256,9 @@ class Scenario(_Section):
                                        "current adds to them; null: the model's (none in the shipped models)")
     vehicle: Vehicle = Field(default_factory=Vehicle, description="the vehicle's setpoint or trajectory")
     sensors: Sensors = Field(default_factory=Sensors)
+    navigation: NavigationSection | None = Field(None, description="navigation sensors (IMU, DVL, depth, fixes) on "
+                                                 "sites of the model (uvms_mj.scenario.navigation); logged, not fed "
+                                                 "to the controller")
     trajectory: TrajectorySection | None = Field(
         None, description="the end-effector's path (uvms_mj.scenario.paths); absent: the paper's line on the "
         "paper's robot, none (hold the initial tip) on others; null: hold the initial tip")
@@ -444,6 +450,7 @@ def _common_issues(sc: Scenario, m: mujoco.MjModel) -> list:
                            f"physics.timestep = {dt:.6g} s: the lag integrates stably only for tau > timestep / "
                            f"{bound} = {dt / bound:.6g} s", tau))
     issues += sensor_issues(sc.sensors, T)
+    issues += navigation_issues(sc, m, dt)
     return issues
 
 

@@ -42,6 +42,8 @@ from uvms_mj.plant.layout import InitialState
 from uvms_mj.plant.plant import Plant
 from uvms_mj.scenario.paths import tip_path
 from uvms_mj.scenario.sections import vehicle_params
+from uvms_mj.scenario.navigation import nav_config, resolved_navigation
+from uvms_mj.sim.navsensors import add_to_spec
 from uvms_mj.scenario.base import (  # noqa: F401  (LAG_STABILITY, log_path, sensor_model: importable from here as before)
     _NO_VALUE,
     LAG_STABILITY,
@@ -421,6 +423,8 @@ def resolved(scenario: Scenario) -> dict:
         params["T"] = T
     d["control_period"] = T
     d["controller"]["params"] = _jsonable(params)
+    if d.get("navigation") is not None:
+        d["navigation"] = resolved_navigation(scenario)
     return _jsonable(d)
 
 
@@ -452,6 +456,7 @@ def build(scenario: Scenario) -> tuple[Plant, Any]:
             tip_site=sc.tip_site,
             failures=[f.failure() for f in th.failures],
             payload=pl.payload.payload() if pl.payload is not None else None,
+            spec_edits=[add_to_spec(nav)] if (nav := nav_config(sc)) is not None else (),
         )
         robot = nominal_robot(sc)
         name = sc.controller.name
@@ -514,15 +519,18 @@ def run_scenario(
     sink: Callable[[float, dict], None] | None = None,
     on_sample: Callable[[int, int], None] | None = None,
     built: tuple | None = None,
+    nav_sink: Callable[[str, Any, dict], None] | None = None,
 ) -> RunResult:
     """Build and run a scenario (:func:`uvms_mj.sim.loop.run_closed_loop`). ``result.meta`` gains
     ``scenario`` (:func:`resolved`), ``name`` and ``backend``. ``built``: the (plant,
-    controller) of :func:`build` if the caller built them already (fresh, never run)."""
+    controller) of :func:`build` if the caller built them already (fresh, never run).
+    ``nav_sink``: receives the navigation samples (:func:`uvms_mj.sim.loop.run_closed_loop`)."""
     plant, ctrl = built if built is not None else build(scenario)
     sensor = sensor_model(scenario)
     T = float(getattr(ctrl, "T", controller_period(scenario)))
     res = run_closed_loop(plant, ctrl, scenario.duration, T=T, sensor=sensor, seed=scenario.seed,
-                          warm_start=scenario.warm_start, on_sample=on_sample, sink=sink)
+                          warm_start=scenario.warm_start, on_sample=on_sample, sink=sink,
+                          navigation=nav_config(scenario), nav_sink=nav_sink)
     res.meta.update(name=scenario.name, backend=plant.backend, scenario=resolved(scenario))
     if plant.layout.base_free:  # a floating robot's logs describe it from its model
         from uvms_mj.scenario.robot import robot_info

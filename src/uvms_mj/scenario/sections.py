@@ -224,6 +224,9 @@ class PlantSection(_Section):
         "MJCF robots: a YAML file of '<element>.<field>': value overrides (e.g. what uvms-mj identify writes), "
         "relative to the scenario file; applied before overrides"))
     payload: PayloadSection | None = Field(None, description="a payload picked up during the run")
+    seabed_depth: float | None = Field(None, gt=0, le=11000.0, description=(
+        "robots with a free vehicle: a flat seabed (a plane geom, no contacts) at world z = -seabed_depth [m], "
+        "for the navigation DVL's beams; null: the model's own scene"))
 
 
 class ThrustersSection(_Section):

@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 import operator
 from dataclasses import dataclass, field
-from typing import Callable, Mapping
+from typing import Any, Callable, Mapping
 
 import numpy as np
 
@@ -92,6 +92,8 @@ class RunResult:
         meta: ``T``, ``dt``, ``seed``, ``controller``, ``joint_ranges`` (the plant's limited
             hinges, :func:`uvms_mj.sim.limits.plant_joint_ranges`) and, for a controller with a
             ``resolved_params`` dict (RAC: its thresholds as numbers), ``controller_params``.
+        navigation: the navigation sensors' samples
+            (:class:`uvms_mj.sim.navsensors.NavigationRecord`) of a run with ``navigation``; else None.
     """
 
     t: np.ndarray
@@ -99,6 +101,7 @@ class RunResult:
     status: str = "ok"
     reason: str = ""
     meta: dict = field(default_factory=dict)
+    navigation: Any = None
 
 
 def _quantize(x: np.ndarray, quantum: float) -> np.ndarray:
@@ -178,6 +181,8 @@ def run_closed_loop(
     warm_start: bool = True,
     on_sample: Callable[[int, int], None] | None = None,
     sink: Callable[[float, dict], None] | None = None,
+    navigation: Any = None,
+    nav_sink: Callable[[str, Any, dict], None] | None = None,
 ) -> RunResult:
     """Run ``controller`` on ``plant`` for ``duration`` seconds.
 
@@ -189,6 +194,11 @@ def run_closed_loop(
         sink: called with (t, row) for every sample as it happens (e.g. an MCAP recorder's
             ``write_sample``), row mapping signal names to floats, ints, bools or 1-D arrays;
             the same rows make up the returned :class:`RunResult`.
+        navigation: the navigation sensors (:class:`uvms_mj.sim.navsensors.NavigationConfig`;
+            the plant built with their :func:`~uvms_mj.sim.navsensors.add_to_spec`), sampled
+            between the plant's steps into ``RunResult.navigation``; the controller does not see them.
+        nav_sink: called with (kind, sample, extra) for every navigation sample as it is taken
+            (e.g. an MCAP recorder's ``write_navigation``).
     """
     dt = plant.model.opt.timestep
     sub = T / dt
@@ -214,6 +224,13 @@ def run_closed_loop(
         layout = None  # a planar base (the paper's): the planar measurement below
 
     per_signal = SignalSensors(sensor.signals, T, seed, plant.layout) if sensor.signals else None
+    nav = None
+    if navigation is not None:
+        from uvms_mj.sim.navsensors import NavigationSuite
+
+        hydro = getattr(plant, "hydro_info", None)
+        nav = NavigationSuite(plant.model, plant.data, navigation, seed, plant.layout.base_body,
+                              float(hydro.water.density) if hydro is not None else 1000.0, sink=nav_sink)
 
     def measure(k: int, q_true: np.ndarray, qd_true: np.ndarray) -> Measurement:
         nonlocal q_prev_meas
@@ -288,7 +305,8 @@ def run_closed_loop(
         if k == n - 1:
             break
         try:
-            state = _step_observe(plant, sub)
+            state = _step_observe(plant, sub) if nav is None else nav.advance(
+                lambda m: _step_observe(plant, m), sub)
         except DivergenceError as exc:
             status, reason = "diverged", str(exc)
             break
@@ -311,9 +329,12 @@ def run_closed_loop(
     resolved = getattr(controller, "resolved_params", None)  # parameters resolved at construction (RAC's thresholds)
     if isinstance(resolved, dict):
         meta["controller_params"] = dict(resolved)
+    if nav is not None:
+        meta["navigation"] = nav.record.describe()
     warned = mujoco_warnings(clear=True)
     if warned:
         meta["mujoco_warnings"] = warned
         if status != "ok":
             reason = f"{reason}; MuJoCo warning: {warned[0]}"
-    return RunResult(t=np.asarray(times), signals=signals, status=status, reason=reason, meta=meta)
+    return RunResult(t=np.asarray(times), signals=signals, status=status, reason=reason, meta=meta,
+                     navigation=nav.record if nav is not None else None)

@@ -1,0 +1,1 @@
+"""State estimation (issue 21): the measurements the navigation sensors give and the estimator takes."""
