@@ -50,17 +50,16 @@ def _read_line(proc, prefix: str, timeout: float) -> str:
     raise AssertionError(f"no {prefix!r} line on stderr; got: {seen + [buf.decode(errors='replace')]}")
 
 
-def test_live_stream_decoded_against_the_log(tmp_path):
+def _stream(tmp_path, scenario: str, duration: float, wanted: set[str]):
+    """`run SCENARIO --live --pace fast` in a subprocess and a client subscribed to the ``wanted``
+    topics until the run ends: (log path, {subscription id: advertised channel}, [(topic, log time
+    [ns], decoded JSON message)] in arrival order)."""
     pytest.importorskip("foxglove", reason="foxglove-sdk (the [live] extra) is not installed")
     ws_client = pytest.importorskip("websockets.sync.client")
-    from mcap.reader import make_reader
-
-    from uvms_mj.io.recorder import read_log
-
     out = tmp_path / "live.mcap"
     env = dict(os.environ, PYTHONPATH=str(SRC) + os.pathsep + os.environ.get("PYTHONPATH", ""))
     # --live-wait: the run starts when the client has subscribed (or after 60 s: the test then fails on the count)
-    cmd = [sys.executable, "-m", "uvms_mj.cli.main", "run", "paper", "--set", "duration=0.5", "-o", str(out),
+    cmd = [sys.executable, "-m", "uvms_mj.cli.main", "run", scenario, "--set", f"duration={duration}", "-o", str(out),
            "--no-plots", "--no-video", "--live", "--live-port", "0", "--live-wait", "60", "--pace", "fast"]
     proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, env=env)
     try:
@@ -71,7 +70,6 @@ def test_live_stream_decoded_against_the_log(tmp_path):
             assert ws.subprotocol == "foxglove.sdk.v1"
             info = json.loads(ws.recv(timeout=30))
             assert info["op"] == "serverInfo" and "time" in info["capabilities"]
-            wanted = {"/tf", "/joint_states", "/scene"}
             while not wanted <= {c["topic"] for c in channels.values()}:
                 msg = ws.recv(timeout=60)
                 if isinstance(msg, str) and json.loads(msg)["op"] == "advertise":
@@ -93,8 +91,13 @@ def test_live_stream_decoded_against_the_log(tmp_path):
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+    return out, subs, frames
 
-    # the channels are the log's: topic, schema name, schema, encodings
+
+def _check_channels(out, subs) -> None:
+    """The advertised channels are the log's: topic, schema name, schema, encodings."""
+    from mcap.reader import make_reader
+
     with open(out, "rb") as f:
         summary = make_reader(f).get_summary()
     logged = {ch.topic: (ch, summary.schemas[ch.schema_id]) for ch in summary.channels.values()}
@@ -104,6 +107,12 @@ def test_live_stream_decoded_against_the_log(tmp_path):
                                                                           schema.encoding)
         assert json.loads(c["schema"]) == json.loads(schema.data)
 
+
+def test_live_stream_decoded_against_the_log(tmp_path):
+    from uvms_mj.io.recorder import read_log
+
+    out, subs, frames = _stream(tmp_path, "paper", 0.5, {"/tf", "/joint_states", "/scene"})
+    _check_channels(out, subs)
     log = read_log(out)
     n = len(log.t)
     assert n == 31  # 0.5 s at the paper's T = 1/60 s, both ends
@@ -173,3 +182,23 @@ def test_realtime_pacing_sleeps_to_simulation_time(monkeypatch):
     assert pushes == [True, False, False, True, False, False, True]  # the first, then after >= 0.05 s (at 0.06, 0.12)
     with pytest.raises(ValueError, match="pace = 'slow'"):
         live_mod.LiveServer(pace="slow")
+
+
+@pytest.mark.slow  # about 5 s: a subprocess that builds the BlueROV2 + Alpha plant
+def test_live_robot_stream_is_the_log(tmp_path):
+    """A floating robot (BlueROV2 Heavy + Alpha): every message of the subscribed channels arrives,
+    the same (decoded) as the log's message of that topic and log time, stamped with that time."""
+    from uvms_mj.io.recorder import iter_messages
+
+    wanted = {"/tf", "/joint_states", "/thrusters", "/scene"}
+    out, subs, frames = _stream(tmp_path, "bluerov2_alpha_station", 0.2, wanted)
+    _check_channels(out, subs)
+    logged = {(ch.topic, m.log_time): json.loads(m.data) for ch, _, m in iter_messages(out) if ch.topic in wanted}
+    got = {(topic, lt): m for topic, lt, m in frames}  # (/scene: the first send and the re-send to the new subscriber)
+    assert got.keys() == logged.keys()
+    assert got == logged
+    assert len({lt for topic, lt in got if topic == "/tf"}) == 11  # 0.2 s at the robot's 50 Hz control rate, both ends
+    for (topic, lt), m in got.items():
+        stamps = [x["timestamp"] for x in m["transforms"]] if topic == "/tf" else (
+            [m["timestamp"]] if topic in ("/joint_states", "/thrusters") else [])
+        assert all(st["sec"] * 10**9 + st["nsec"] == lt for st in stamps)

@@ -15,8 +15,10 @@ time (the recorder encodes its pending samples then), so the app sees the run as
 
 The server announces the simulation time (the SDK's ``time`` capability) at each push, so the
 app's clock is the run's. The scene and the paths (messages outside the per-sample stream, which
-the log sends once or now and then) are kept and sent again when a client subscribes, so an app
-that connects during the run still draws the robot.
+the log sends once or now and then) are kept and sent again, with their log times, when a client
+subscribes, every ``resend_period`` s of wall time while one is subscribed, and at :meth:`~LiveServer.close`,
+so an app that connects during the run still draws the robot (a subscription can become active a
+moment after the SDK reports it: the periodic and final sends cover that).
 """
 
 from __future__ import annotations
@@ -37,15 +39,21 @@ class LiveUnavailable(ImportError):
     """foxglove-sdk is not installed (the message says how to install it)."""
 
 
-class _Listener:
-    """The SDK's ServerListener: a subscription sets the server's events (called from its thread)."""
+def _listener(subscribed: threading.Event, resend: threading.Event, active: list[int]) -> Any:
+    """The SDK's ServerListener (its other callbacks: the protocol's defaults, which do nothing): a
+    subscription sets the two events and counts in ``active[0]`` (called from the server's thread)."""
+    from foxglove.websocket import ServerListener
 
-    def __init__(self, subscribed: threading.Event, resend: threading.Event) -> None:
-        self._subscribed, self._resend = subscribed, resend
+    class _Listener(ServerListener):
+        def on_subscribe(self, client: Any, channel: Any) -> None:  # noqa: ARG002
+            active[0] += 1
+            subscribed.set()
+            resend.set()
 
-    def on_subscribe(self, client: Any, channel: Any) -> None:  # noqa: ARG002
-        self._subscribed.set()
-        self._resend.set()
+        def on_unsubscribe(self, client: Any, channel: Any) -> None:  # noqa: ARG002
+            active[0] -= 1
+
+    return _Listener()
 
 
 class LiveServer:
@@ -58,6 +66,11 @@ class LiveServer:
         wait: the longest wall-clock time [s] to wait, when the first message is sent (the channels
             are then advertised), for a client to subscribe to a channel (0: do not wait).
         push_interval: the longest wall-clock time [s] between sends (default 1/30 s: a display rate).
+        linger: the wall-clock time [s] the server keeps sending at :meth:`close` while a client is
+            subscribed (the SDK's ``stop`` drops the messages still queued; on this machine a run's last
+            messages reach a local client within milliseconds, 0.5 s is ample; 0: stop at once).
+        resend_period: the wall-clock time [s] between re-sends of the scene and paths while a client
+            is subscribed (1 s: an app that connects mid-run draws the robot within a second).
         name: the server's name shown by the app.
 
     Raises:
@@ -69,12 +82,14 @@ class LiveServer:
     """
 
     def __init__(self, host: str = "127.0.0.1", port: int = 8765, pace: str = "realtime", *, wait: float = 0.0,
-                 push_interval: float = 1 / 30, name: str = "uvms-mj") -> None:
+                 push_interval: float = 1 / 30, linger: float = 0.5, resend_period: float = 1.0,
+                 name: str = "uvms-mj") -> None:
         if pace not in PACES:
             raise ValueError(f"pace = {pace!r}; allowed: {', '.join(PACES)}")
         if isinstance(port, bool) or not isinstance(port, int) or not 0 <= port <= 65535:
             raise ValueError(f"port = {port!r}; allowed: an integer 0..65535 (0: any free port)")
-        for key, value in (("wait", wait), ("push_interval", push_interval)):
+        for key, value in (("wait", wait), ("push_interval", push_interval), ("linger", linger),
+                           ("resend_period", resend_period)):
             if not (isinstance(value, (int, float)) and math.isfinite(value) and value >= 0):
                 raise ValueError(f"{key} = {value!r} s; allowed: a finite number >= 0")
         try:
@@ -84,10 +99,12 @@ class LiveServer:
             raise LiveUnavailable(INSTALL_HINT) from exc
         self._fg = foxglove
         self.host, self.pacing, self.wait, self.push_interval = host, pace, float(wait), float(push_interval)
-        self._subscribed, self._resend = threading.Event(), threading.Event()
+        self.linger, self.resend_period = float(linger), float(resend_period)
+        self._last_resend = -math.inf
+        self._subscribed, self._resend, self._active = threading.Event(), threading.Event(), [0]
         self._context = foxglove.Context()  # its own: the run's channels only, never the global context's
         self._server = foxglove.start_server(name=name, host=host, port=port, capabilities=[Capability.Time],
-                                             server_listener=_Listener(self._subscribed, self._resend),
+                                             server_listener=_listener(self._subscribed, self._resend, self._active),
                                              context=self._context)
         self.port: int = self._server.port
         self._channels: dict[int, Any] = {}
@@ -117,7 +134,7 @@ class LiveServer:
 
     def add_samples(self, samples: Iterable[tuple[Any, int, int]]) -> None:
         self._begin()
-        if self._resend.is_set():
+        if self._resend.is_set() or (self._active[0] > 0 and _monotonic() - self._last_resend >= self.resend_period):
             self._send_kept()
         channels = self._channels
         last = None
@@ -159,19 +176,25 @@ class LiveServer:
 
     def _send_kept(self) -> None:
         self._resend.clear()
+        self._last_resend = _monotonic()
         for cid, (log_time, data) in list(self._kept.items()):
             self._channels[cid].log(data, log_time=log_time)
 
     def close(self) -> None:
-        """Stop the server (its channels are closed first, so clients see them unadvertised). Later calls do nothing."""
+        """Stop the server (after ``linger`` s while a client is subscribed) and close its channels.
+        Later calls do nothing."""
         if self.closed:
             return
         self.closed = True
         try:
-            for channel in self._channels.values():
-                channel.close()
+            if self._active[0] > 0:
+                self._send_kept()
+                if self.linger > 0:
+                    time.sleep(self.linger)
         finally:
             self._server.stop()
+            for channel in self._channels.values():
+                channel.close()
 
     def __enter__(self) -> "LiveServer":
         return self
