@@ -202,3 +202,56 @@ def test_live_robot_stream_is_the_log(tmp_path):
         stamps = [x["timestamp"] for x in m["transforms"]] if topic == "/tf" else (
             [m["timestamp"]] if topic in ("/joint_states", "/thrusters") else [])
         assert all(st["sec"] * 10**9 + st["nsec"] == lt for st in stamps)
+
+
+class _ListSink:
+    """A second sink (uvms_mj.io.sinks.MessageSink) that keeps what it gets; pace(): a send every 5th sample."""
+
+    def __init__(self) -> None:
+        self.channels, self.messages, self.paced = {}, [], 0
+
+    def open_channel(self, channel_id, topic, message_encoding, schema_name, schema_encoding, schema_data, metadata):
+        assert channel_id not in self.channels
+        self.channels[channel_id] = (topic, message_encoding, schema_name, schema_encoding, schema_data, metadata)
+
+    def add_message(self, channel_id, log_time, data):
+        assert channel_id in self.channels
+        self.messages.append((channel_id, log_time, bytes(data)))
+
+    def add_samples(self, samples):
+        for messages, log_time, _ in samples:
+            for cid, data in messages:
+                assert cid in self.channels
+                self.messages.append((cid, log_time, bytes(data)))
+
+    def pace(self, t):
+        self.paced += 1
+        return self.paced % 5 == 0
+
+
+def test_second_sink_gets_the_files_channels_and_messages(tmp_path):
+    """Without foxglove-sdk: McapRecorder(live=sink) gives the sink every channel of the file (topic,
+    encodings, schema, metadata) and every message, in the file's order (uvms_mj.io.sinks.Tee)."""
+    from mcap.reader import make_reader
+
+    from uvms_mj.io.recorder import McapRecorder
+    from uvms_mj.sim.experiment import PaperExperiment
+    from uvms_mj.sim.loop import run_closed_loop
+
+    plant, ctrl = PaperExperiment(duration=0.5).build()
+    sink, path = _ListSink(), tmp_path / "tee.mcap"
+    with McapRecorder(path, plant.params, {}, live=sink) as rec:
+        res = run_closed_loop(plant, ctrl, 0.5, T=ctrl.T, sink=rec.write_sample)
+        rec.close(res.status, res.reason, meta=res.meta)
+    with open(path, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        file_msgs = [(m.channel_id, m.log_time, m.data) for _, _, m in reader.iter_messages(log_time_order=False)]
+    assert sink.paced == len(res.t) == 31
+    assert {cid: c[0] for cid, c in sink.channels.items()} == {cid: c.topic for cid, c in summary.channels.items()}
+    for cid, (topic, enc, sname, senc, sdata, meta) in sink.channels.items():
+        ch = summary.channels[cid]
+        schema = summary.schemas[ch.schema_id]
+        assert (enc, sname, senc, sdata, meta) == (ch.message_encoding, schema.name, schema.encoding, schema.data,
+                                                   ch.metadata)
+    assert sink.messages == file_msgs
