@@ -67,8 +67,8 @@ class LiveServer:
             are then advertised), for a client to subscribe to a channel (0: do not wait).
         push_interval: the longest wall-clock time [s] between sends (default 1/30 s: a display rate).
         linger: the wall-clock time [s] the server keeps sending at :meth:`close` while a client is
-            subscribed (the SDK's ``stop`` drops the messages still queued; on this machine a run's last
-            messages reach a local client within milliseconds, 0.5 s is ample; 0: stop at once).
+            subscribed (the SDK's ``stop`` drops the messages still queued: 200 messages stopped at once
+            reached a local client 0, 127, 0 times of 3, after 0.3 s all 3 times; 0: stop at once).
         resend_period: the wall-clock time [s] between re-sends of the scene and paths while a client
             is subscribed (1 s: an app that connects mid-run draws the robot within a second).
         name: the server's name shown by the app.
