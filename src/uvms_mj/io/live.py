@@ -18,7 +18,9 @@ app's clock is the run's. The scene and the paths (messages outside the per-samp
 the log sends once or now and then) are kept and sent again, with their log times, when a client
 subscribes, every ``resend_period`` s of wall time while one is subscribed, and at :meth:`~LiveServer.close`,
 so an app that connects during the run still draws the robot (a subscription can become active a
-moment after the SDK reports it: the periodic and final sends cover that).
+moment after the SDK reports it, foxglove/foxglove-sdk#533, and foxglove-sdk 0.30.3 can refuse a
+subscription that arrives a moment after the channel's advertisement with "Unknown channel ID": a
+client that subscribes again gets the scene with the periodic and final sends).
 """
 
 from __future__ import annotations
