@@ -14,8 +14,9 @@ from uvms_mj.cli.common import (EXIT_JOINT_LIMIT, EXIT_INTERRUPTED, EXIT_RENDER,
 from uvms_mj.plant.params import ParameterError
 
 
-def _run_one(scenario, out: Path, progress: bool = True, source: str | None = None):
-    """Run one scenario into an MCAP log; returns (result, log path, metrics)."""
+def _run_one(scenario, out: Path, progress: bool = True, source: str | None = None, live=None):
+    """Run one scenario into an MCAP log (and to ``live``, a LiveServer, when given); returns
+    (result, log path, metrics)."""
     from uvms_mj.sim.experiment import metrics
     from uvms_mj.io.recorder import LogInUseError, McapRecorder, handle_sigterm
     from uvms_mj.scenario.schema import ScenarioError, build, resolved, run_scenario
@@ -27,7 +28,7 @@ def _run_one(scenario, out: Path, progress: bool = True, source: str | None = No
         raise click.UsageError(str(exc)) from None
     _warn(scenario)
     meta = {"scenario": resolved(scenario), "seed": scenario.seed}
-    rec_kw = {}
+    rec_kw = {"live": live} if live is not None else {}
     if getattr(getattr(plant, "layout", None), "base_free", False):  # a floating robot: the recorder describes it from its model
         from uvms_mj.scenario.robot import robot_info
 
@@ -57,6 +58,22 @@ def _run_one(scenario, out: Path, progress: bool = True, source: str | None = No
     except OSError as exc:
         _io_error(out, exc)
     return res, out, metrics(res)
+
+
+def _live_server(port: int, pace: str, wait: float):
+    """The --live server (uvms_mj.io.live.LiveServer); exit 2 in one line without foxglove-sdk or the port."""
+    from uvms_mj.io.live import LiveServer, LiveUnavailable
+
+    try:
+        server = LiveServer(port=port, pace=pace, wait=wait)
+    except LiveUnavailable as exc:
+        click.echo(f"error: {exc}", err=True)
+        sys.exit(2)
+    except (OSError, RuntimeError) as exc:  # the port is taken (the SDK's error)
+        click.echo(f"error: --live: cannot listen on 127.0.0.1:{port}: {exc}", err=True)
+        sys.exit(2)
+    click.echo(f"live: {server.url} (Foxglove: Open connection -> Foxglove WebSocket; pace {pace})", err=True)
+    return server
 
 
 def _plots(log_path: Path, echo=click.echo) -> None:
@@ -118,17 +135,32 @@ def _render(log, video_path: Path, log_path, **kw) -> dict:
 @click.option("--video/--no-video", default=None, help="Render an MP4 next to the log (default: outputs.video).")
 @click.option("--plots/--no-plots", default=None, help="Write PNG plots next to the log (default: outputs.plots).")
 @click.option("--json", "json_out", metavar="PATH|-", default=None, help=_JSON_HELP)
+@click.option("--live", is_flag=True, help="Also stream the run to the Foxglove app (WebSocket, ws://127.0.0.1:PORT; "
+              "needs foxglove-sdk: pip install 'uvms-mj[live]').")
+@click.option("--live-port", type=click.IntRange(0, 65535), default=8765, show_default=True,
+              help="The --live server's port (0: any free port, printed).")
+@click.option("--live-wait", type=click.FloatRange(0, 3600), default=0.0, show_default=True, metavar="SECONDS",
+              help="With --live: wait up to SECONDS for the app to subscribe before the run starts.")
+@click.option("--pace", type=click.Choice(["realtime", "fast"]), default=None,
+              help="With --live: simulation time follows wall time (realtime, the default) or runs as fast as it can.")
 def run_cmd(scenario: str, sets: tuple[str, ...], out: str | None, video: bool | None, plots: bool | None,
-        json_out: str | None) -> None:
+        json_out: str | None, live: bool, live_port: int, live_wait: float, pace: str | None) -> None:
     """Run SCENARIO, write its MCAP log and print a metrics table.
 
     Exits with 3 if the run diverged (the log is kept, with the reason)."""
     echo = _json_dest(json_out == "-")
+    if pace is not None and not live:
+        raise click.UsageError("--pace needs --live (a run without it goes as fast as it can)")
     sc = _load(scenario, sets)
     log = _default_log(sc, out, sc.controller.name)
     if video if video is not None else sc.outputs.video:
         _check_out(log.with_suffix(".mp4"), kind="video", magic=None)
-    res, log, m = _run_one(sc, log, source=scenario)
+    server = _live_server(live_port, pace or "realtime", live_wait) if live else None
+    try:
+        res, log, m = _run_one(sc, log, source=scenario, live=server)
+    finally:
+        if server is not None:
+            server.close()
     echo(f"log: {log}")
     echo(metrics_table({sc.controller.name: m}, {sc.controller.name: res.status}))
     if json_out:

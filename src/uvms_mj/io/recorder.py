@@ -120,6 +120,11 @@ chunk in one call per batch, and compressed by one reused zstd compressor
 at level 1 (:class:`uvms_mj.io.mcap_writer.LeanWriter`). A row is kept (a shallow copy) until its
 batch is written: its arrays must not be changed in place after :meth:`McapRecorder.write_sample`.
 
+Live view: given ``live=`` (:class:`uvms_mj.io.live.LiveServer`, ``uvms-mj run --live``), the recorder
+writes the same channels and messages through :class:`uvms_mj.io.sinks.Tee` to the file and to the
+Foxglove WebSocket server, encodes its pending samples every ``push_interval`` s of wall time and lets
+the server pace the run (real time or as fast as possible).
+
 Typical use (e.g. in the CLI)::
 
     with handle_sigterm(), McapRecorder(path, plant.params, metadata) as rec:

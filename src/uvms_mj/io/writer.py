@@ -31,10 +31,12 @@ from uvms_mj.io.robot_channels import _RobotChannels, _tip_site_of
 from uvms_mj.io.schemas import (LOG_FORMAT, METADATA_NAME, PAPER_JOINT_NAMES, RESERVED_KEYS, SCHEMAS, STATE_SIGNALS,
                                 STATUS_NAME, TOPIC_CONTROL, TOPIC_JOINTS, TOPIC_PATHS, TOPIC_SCENE, TOPIC_STATE,
                                 TOPIC_TF, _sample_schema)
+from uvms_mj.io.sinks import Tee
 from uvms_mj.plant.params import RobotParams
 
 if TYPE_CHECKING:
     import mujoco
+    from uvms_mj.io.live import LiveServer
 
 
 class McapRecorder(NavigationChannels):
@@ -59,6 +61,7 @@ class McapRecorder(NavigationChannels):
             ``/thrusters`` and ``/scene/paths`` come from it by name (:mod:`uvms_mj.io.recorder`, robot
             logs). The tip site is ``metadata["robot"]["layout"]["tip_site"]`` when given, else
             :meth:`~uvms_mj.plant.robot.Layout.of`'s default.
+        live: a second sink (:class:`~uvms_mj.io.live.LiveServer`: to Foxglove), fed as the file is, pacing the run.
 
     Use it as a context manager: leaving the block closes the log, with status "ok", or
     "interrupted" on KeyboardInterrupt (and SIGTERM inside :func:`handle_sigterm`), or "error"
@@ -77,6 +80,7 @@ class McapRecorder(NavigationChannels):
         chunk_size: int = 512 * 1024,
         compression: str = "zstd",
         model: "mujoco.MjModel | None" = None,
+        live: "LiveServer | None" = None,
     ) -> None:
         if not (flush_interval >= 0 and math.isfinite(flush_interval)):
             raise ValueError(f"flush_interval = {flush_interval!r} s must be finite and >= 0")
@@ -105,6 +109,7 @@ class McapRecorder(NavigationChannels):
         self._file = _open_locked(self.path)
         try:
             self._writer = LeanWriter(self._file, chunk_size=chunk_size, compression=comp[compression])
+            self._live, self._writer = live, (Tee(self._writer, live) if live is not None else self._writer)
             self._writer.start(profile="", library=f"uvms_mj {_version('uvms-mj') or ''} / mcap")
             record = dict(metadata)
             record.update(provenance())
@@ -284,6 +289,9 @@ class McapRecorder(NavigationChannels):
             self._last_ns = ns
             if self.samples == 1 or time.monotonic() - self._last_flush >= self.flush_interval:
                 self.flush()
+        if self._live is not None and self._live.pace(t):  # (outside the critical section: Ctrl-C ends a wait)
+            with _CRITICAL:
+                self._write_pending()
 
     def _write_pending(self) -> None:
         """Encode and write the samples kept since the last flush, in order (with the paths)."""
