@@ -4,10 +4,10 @@ from a log cut short by ``kill -9``), :func:`iter_messages`, :func:`log_info` an
 
 from __future__ import annotations
 
-import io
 import json
 import os
 import struct
+from array import array
 from dataclasses import dataclass
 from typing import Any, Iterator, Mapping
 
@@ -60,47 +60,73 @@ def _params_from_dict(d: Mapping[str, Any] | None) -> RobotParams | None:
         return None
 
 
-def _complete_prefix(data: bytes) -> tuple[int, bool]:
-    """Length of the longest prefix made of whole top-level records, and whether the file is
-    complete (footer and closing magic present)."""
-    if len(data) < len(_MAGIC) or data[: len(_MAGIC)] != _MAGIC:
+def _complete_prefix(f) -> tuple[int, bool]:
+    """Length of the longest prefix of the open file ``f`` made of whole top-level records, and
+    whether the file is complete (footer and closing magic present); reads only record headers."""
+    size = os.fstat(f.fileno()).st_size
+    f.seek(0)
+    if size < len(_MAGIC) or f.read(len(_MAGIC)) != _MAGIC:
         raise McapError("not an MCAP file (bad magic)")
-    pos, n = len(_MAGIC), len(data)
-    while pos + 9 <= n:
-        op, length = struct.unpack_from("<BQ", data, pos)
+    pos = len(_MAGIC)
+    while pos + 9 <= size:
+        f.seek(pos)
+        op, length = struct.unpack("<BQ", f.read(9))
         end = pos + 9 + length
-        if end > n:
+        if end > size:
             break
         pos = end
         if op == _OP_FOOTER:
-            return pos, data[pos: pos + len(_MAGIC)] == _MAGIC
+            f.seek(pos)
+            return pos, f.read(len(_MAGIC)) == _MAGIC
     return pos, False
+
+
+class _Prefix:
+    """The first ``limit`` bytes of an open file, as a stream (what the MCAP reader reads)."""
+
+    def __init__(self, f, limit: int) -> None:
+        self._f, self._left = f, limit
+
+    def read(self, n: int = -1) -> bytes:
+        n = self._left if n is None or n < 0 else min(n, self._left)
+        data = self._f.read(n)
+        self._left -= len(data)
+        return data
+
+
+def _iter_records(path: str | os.PathLike, state: dict) -> Iterator:
+    """The records of a log in file order (chunks broken up), one chunk in memory at a time;
+    stops at the first incomplete or corrupt record. When exhausted, ``state["truncated"]``
+    says whether the file was cut short."""
+    with open(path, "rb") as f:
+        end, complete = _complete_prefix(f)
+        f.seek(0)
+        # A complete file keeps its closing magic (the stream reader checks it after the footer).
+        reader = StreamReader(_Prefix(f, end + len(_MAGIC) if complete else end), emit_chunks=True,
+                              validate_crcs=False)
+        try:
+            for rec in reader.records:
+                if isinstance(rec, Chunk):
+                    try:
+                        inner = breakup_chunk(rec, validate_crc=True)
+                    except Exception:
+                        complete = False
+                        break
+                    yield from inner
+                else:
+                    yield rec
+        except Exception:
+            # McapError (EndOfFile at the cut) or a record that does not parse: keep what came before.
+            complete = False
+    state["truncated"] = not complete
 
 
 def _records(path: str | os.PathLike) -> tuple[list, bool]:
     """All records of a log in file order (chunks broken up), and whether it was truncated.
     Stops at the first incomplete or corrupt record."""
-    with open(path, "rb") as f:
-        data = f.read()
-    end, complete = _complete_prefix(data)
-    out: list = []
-    # A complete file keeps its closing magic (the stream reader checks it after the footer).
-    body = data[: end + len(_MAGIC)] if complete else data[:end]
-    reader = StreamReader(io.BytesIO(body), emit_chunks=True, validate_crcs=False)
-    try:
-        for rec in reader.records:
-            if isinstance(rec, Chunk):
-                try:
-                    out.extend(breakup_chunk(rec, validate_crc=True))
-                except Exception:
-                    complete = False
-                    break
-            else:
-                out.append(rec)
-    except Exception:
-        # McapError (EndOfFile at the cut) or a record that does not parse: keep what came before.
-        complete = False
-    return out, not complete
+    state: dict = {}
+    out = list(_iter_records(path, state))
+    return out, state["truncated"]
 
 
 def iter_messages(path: str | os.PathLike) -> Iterator[tuple[Channel, Schema | None, Message]]:
@@ -174,6 +200,78 @@ def _status(scan: dict, truncated: bool, t_end: float | None) -> tuple[str, str,
     return "unknown", "no status record", {}
 
 
+#: Messages of a sample channel decoded at a time by :func:`read_log` (bounds the JSON objects in memory).
+_BATCH = 2048
+
+
+class _Columns:
+    """One sample channel's messages as columns: per message its sequence and time, per signal
+    the values (numpy blocks of :data:`_BATCH` messages, converted as one list each) and whether
+    the message had it. Memory: the arrays plus one batch of decoded JSON."""
+
+    def __init__(self, layout: list[dict]) -> None:
+        self.layout = layout
+        self._names = [e["name"] for e in layout]
+        self._seqs = array("q")
+        self._times = array("d")
+        self._batch: list[dict] = []
+        self._blocks: dict[str, list[np.ndarray]] = {n: [] for n in self._names}
+        self._present: dict[str, list[np.ndarray]] = {n: [] for n in self._names}
+
+    def add(self, m: Message) -> None:
+        msg = json.loads(m.data)
+        self._seqs.append(m.sequence)
+        if "t" in msg:
+            t = float(msg["t"])
+        else:
+            stamp = msg.get("timestamp") or {}
+            t = stamp["sec"] + 1e-9 * stamp["nsec"] if "sec" in stamp and "nsec" in stamp else float("nan")
+        self._times.append(t)
+        self._batch.append(msg)
+        if len(self._batch) >= _BATCH:
+            self._decode()
+
+    def _decode(self) -> None:
+        batch, self._batch = self._batch, []
+        for name in self._names:
+            has = np.fromiter((name in msg for msg in batch), dtype=bool, count=len(batch))
+            vals = [msg[name] for msg in batch if name in msg]
+            self._present[name].append(has)
+            if vals:
+                arr = np.asarray(vals)
+                if arr.dtype == object:  # null (NaN) among the values
+                    arr = np.array(vals, dtype=float)
+                self._blocks[name].append(arr)
+
+    def finish(self) -> None:
+        if self._batch:
+            self._decode()
+        self.seqs = np.frombuffer(self._seqs, dtype=np.int64) if len(self._seqs) else np.zeros(0, np.int64)
+        self.times = np.frombuffer(self._times, dtype=float) if len(self._times) else np.zeros(0)
+
+    def unique_seqs(self) -> np.ndarray:
+        return np.unique(self.seqs)
+
+    def pick(self, keep: np.ndarray) -> np.ndarray:
+        """Indices of this channel's first message of each sequence in ``keep`` (sorted)."""
+        uniq, first = np.unique(self.seqs, return_index=True)
+        return first[np.isin(uniq, keep)]
+
+    def values(self, name: str, picked: np.ndarray) -> np.ndarray | None:
+        """The values of ``name`` in the picked messages that have it (None: none has)."""
+        blocks = self._blocks[name]
+        if not blocks:
+            return None
+        has = np.concatenate(self._present[name])
+        where = np.cumsum(has) - 1  # message index -> index of its value
+        idx = where[picked[has[picked]]]
+        if not len(idx):
+            return None
+        vals = blocks[0] if len(blocks) == 1 else np.concatenate(blocks)
+        return vals[idx]
+
+
+
 def read_log(path: str | os.PathLike, as_dataframe: bool = False) -> LogData:
     """Read a log written by :class:`McapRecorder` (complete, or cut off by ``kill -9``).
 
@@ -191,38 +289,48 @@ def read_log(path: str | os.PathLike, as_dataframe: bool = False) -> LogData:
     ``meta`` (e.g. the RunResult's T, dt, seed, controller) that it does not already have,
     plus ``T`` (inferred from the sample times if recorded nowhere).
     """
-    recs, truncated = _records(path)
-    scan = _scan(recs)
-    sample_chs = _sample_channels(scan)
-    seqs = _complete_sequences(scan, sample_chs)
-    keep = set(seqs)
-    payloads: list[dict[int, dict]] = [dict() for _ in seqs]
-    pos = {s: i for i, s in enumerate(seqs)}
-    for ch, _ in sample_chs:
-        for m in scan["messages"].get(ch.id, []):
-            if m.sequence in keep:
-                payloads[pos[m.sequence]].setdefault(ch.id, json.loads(m.data))
-    order = sorted((e["index"], e["name"], e["dtype"], tuple(e["shape"]), ch.id)
-                   for ch, layout in sample_chs for e in layout)
-    rec: dict[str, list] = {}
-    times: list[float] = []
-    for p in payloads:
-        first = next(iter(p.values()))
-        times.append(float(first["t"]) if "t" in first else
-                     first["timestamp"]["sec"] + 1e-9 * first["timestamp"]["nsec"])
-        for _, name, _, _, cid in order:
-            msg = p[cid]
-            if name in msg:
-                rec.setdefault(name, []).append(msg[name])
+    state: dict = {}
+    channels: dict[int, Channel] = {}
+    metas: dict[str, dict] = {}
+    columns: dict[int, _Columns] = {}  # sample channel id -> its messages, decoded a batch at a time
+    early: dict[int, list[Message]] = {}  # messages met before their channel record (none from our writer)
+    for r in _iter_records(path, state):
+        if isinstance(r, Message):
+            col = columns.get(r.channel_id)
+            if col is not None:
+                col.add(r)
+            elif r.channel_id not in channels:
+                early.setdefault(r.channel_id, []).append(r)
+        elif isinstance(r, Channel):
+            if r.id not in channels:
+                channels[r.id] = r
+                before = early.pop(r.id, [])
+                if r.topic in SAMPLE_TOPICS and "uvms_mj.signals" in r.metadata:
+                    columns[r.id] = _Columns(json.loads(r.metadata["uvms_mj.signals"]))
+                    for m in before:
+                        columns[r.id].add(m)
+        elif isinstance(r, Metadata):
+            metas.setdefault(r.name, _decode_meta(r.metadata))
+    truncated = state["truncated"]
+    scan = {"metadata": metas}
+    sample = [(cid, columns[cid]) for cid in channels if cid in columns]  # in the order of the channel records
+    for _, col in sample:
+        col.finish()
+    keep = None
+    for _, col in sample:
+        keep = col.unique_seqs() if keep is None else np.intersect1d(keep, col.unique_seqs())
+    keep = np.zeros(0, dtype=np.int64) if keep is None else keep
+    order = sorted((e["index"], e["name"], e["dtype"], tuple(e["shape"]), cid)
+                   for cid, col in sample for e in col.layout)
+    picks = {cid: col.pick(keep) for cid, col in sample}  # per channel: its message of each kept sequence
+    times = sample[0][1].times[picks[sample[0][0]]] if sample else np.zeros(0)
     signals: dict[str, np.ndarray] = {}
-    for _, name, dtype, shape, _ in order:
+    for _, name, dtype, shape, cid in order:
         want = np.dtype(dtype)
-        if name not in rec:
+        arr = columns[cid].values(name, picks[cid])
+        if arr is None:
             signals[name] = np.zeros((0,) + shape, dtype=want)
             continue
-        arr = np.asarray(rec[name])
-        if arr.dtype == object:  # null (NaN) among the values
-            arr = np.array(rec[name], dtype=float)
         if len(shape) > 1 and arr.ndim == 2 and arr.shape[1] == int(np.prod(shape)):
             arr = arr.reshape((len(arr),) + shape)
         if want.kind == "b":
