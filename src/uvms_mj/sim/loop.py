@@ -3,14 +3,14 @@
 Measurements are sampled at kT: base pose and joint angles, with optional Gaussian noise,
 quantization and a one-sample delay (:class:`SensorModel`); velocities come from a velocity
 sensor if configured, else the controller differentiates positions. Every controller signal and
-the true plant state are recorded per sample. A diverging plant stops the run cleanly with the
-time and the reason (the record up to then is kept).
+the true plant state are recorded per sample (:class:`uvms_mj.sim.samples.SampleRecord`: arrays
+of the run's final size). A diverging plant stops the run cleanly with the time and the reason
+(the record up to then is kept).
 """
 
 from __future__ import annotations
 
 import math
-import operator
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
@@ -20,6 +20,7 @@ from uvms_mj.control.base import Command, Controller, Measurement
 from uvms_mj.plant.plant import DivergenceError, Plant, mujoco_warnings
 from uvms_mj.rotations import quat_from_rotvec, quat_mul
 from uvms_mj.sim.limits import joint_limit_status, plant_joint_ranges
+from uvms_mj.sim.samples import SampleRecord
 from uvms_mj.sim.sensors import Signal, SignalSensors
 
 
@@ -207,8 +208,8 @@ def run_closed_loop(
     sub = int(round(sub))
     n = int(math.floor(duration / T + 1e-9)) + 1
     rng = np.random.default_rng(seed)
-    rows: list[dict] = []
-    times: list[float] = []
+    rows = SampleRecord(n)  # every signal in one array of the run's size (memory: the values only)
+    times = np.empty(n)
     status, reason = "ok", ""
     q_prev_meas = None
     mujoco_warnings(clear=True)  # only this run's
@@ -290,7 +291,7 @@ def run_closed_loop(
         applied = plant.joint_torques_applied if has_applied else torques
         if k == 0 and warm_start:
             plant.warm_start(thrust)
-        times.append(k * T)
+        times[k] = k * T
         row = {**cmd.signals, "q_true": q_true, "qd_true": qd_true, "tip_true": tip_true, "q_measured": meas.q,
                "thrust_command": thrust,
                "thrust_force": thr_lagged if thr_lagged is not None and k > 0 else plant.thruster_forces,
@@ -310,16 +311,8 @@ def run_closed_loop(
         except DivergenceError as exc:
             status, reason = "diverged", str(exc)
             break
-    keys = dict.fromkeys(key for row in rows[:1] for key in row)  # first-appearance order
-    uniform = True  # every row has the first row's signals
-    for row in rows[1:]:
-        if len(row) != len(keys) or not keys.keys() >= row.keys():
-            keys.update(dict.fromkeys(row))
-            uniform = False
-    if uniform:
-        signals = {key: np.asarray(list(map(operator.itemgetter(key), rows))) for key in keys}
-    else:
-        signals = {key: np.asarray([row[key] for row in rows if key in row]) for key in keys}
+    signals = rows.signals()
+    times = times[:len(rows)] if len(rows) == n else times[:len(rows)].copy()
     ranges = plant_joint_ranges(plant.model)
     meta = {"T": T, "dt": dt, "seed": seed, "controller": controller_name(controller), "joint_ranges": ranges}
     if status == "ok" and ranges and "q_true" in signals:  # finished: did a joint leave the plant's range?
@@ -336,5 +329,5 @@ def run_closed_loop(
         meta["mujoco_warnings"] = warned
         if status != "ok":
             reason = f"{reason}; MuJoCo warning: {warned[0]}"
-    return RunResult(t=np.asarray(times), signals=signals, status=status, reason=reason, meta=meta,
+    return RunResult(t=times, signals=signals, status=status, reason=reason, meta=meta,
                      navigation=nav.record if nav is not None else None)
