@@ -1,5 +1,9 @@
 """What the figures share: reading a log's signals and metadata, shading, panel finishing and
-number formatting (matplotlib's Figure directly, never pyplot)."""
+number formatting (matplotlib's Figure directly, never pyplot), and the decimation that keeps a
+figure's memory independent of the run's length: every line added to one of our figures keeps at
+most :data:`MAX_LINE_POINTS` points (:func:`decimate`: per bucket of consecutive samples its
+first and last point and the points of its smallest and largest x and y, so that every peak
+stays visible); the numbers a figure prints (RMS, max) come from the full data."""
 
 from __future__ import annotations
 
@@ -8,11 +12,73 @@ from typing import Any, Mapping
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
+from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
 _PHASES = {1: ("carry (base moves with the arm)", "#f4a582"), 2: ("release", "#92c5de")}
 _XY = ("#1f77b4", "#d62728")  # x, y
 _DPI = 110
+
+#: The most points a line in one of our figures keeps [points] (ours: a panel is about 700 px
+#: wide at :data:`_DPI`, so 1000 buckets of up to 8 points each are finer than a pixel column).
+MAX_LINE_POINTS = 8000
+
+
+def decimate(x: np.ndarray, y: np.ndarray, max_points: int = MAX_LINE_POINTS) -> np.ndarray:
+    """Indices (sorted) of the points of the line (x, y) to draw: all of them if there are at
+    most ``max_points``, else, for each of ``max_points // 8`` buckets of consecutive points, its
+    first and last point, the points of its smallest and largest y and of its smallest and largest
+    x (a parametric path keeps its extent too) and its first NaN (a gap stays a gap). The
+    decimated line thus has the same minimum and maximum as the full one over every bucket."""
+    x, y = np.asarray(x), np.asarray(y)
+    n = len(y)
+    if max_points < 8:
+        raise ValueError(f"decimate: max_points = {max_points!r}; allowed: >= 8")
+    if n <= max_points:
+        return np.arange(n)
+    nb = max_points // 8
+    size = -(-n // nb)  # ceil
+    pad = nb * size - n
+    picks = [np.arange(nb) * size, np.minimum(np.arange(1, nb + 1) * size - 1, n - 1)]
+    for v in (y, x):
+        v = np.asarray(v, dtype=float)
+        nan = np.isnan(v)
+        vp = np.pad(v, (0, pad), mode="edge").reshape(nb, size)
+        np_ = np.pad(nan, (0, pad), mode="edge").reshape(nb, size)
+        base = np.arange(nb) * size
+        picks.append(base + np.argmin(np.where(np_, np.inf, vp), axis=1))
+        picks.append(base + np.argmax(np.where(np_, -np.inf, vp), axis=1))
+        if nan.any():
+            has = np_.any(axis=1)
+            picks.append((base + np.argmax(np_, axis=1))[has])
+    idx = np.unique(np.concatenate(picks))
+    return idx[idx < n]
+
+
+class _DecimatingAxes(Axes):
+    """Axes whose lines are decimated as they are added (:func:`decimate`), before matplotlib
+    makes its per-line copies for drawing."""
+
+    def add_line(self, line: Line2D) -> Line2D:
+        try:
+            x = np.asarray(line.get_xdata(orig=True))
+            y = np.asarray(line.get_ydata(orig=True))
+            if x.ndim == 1 and y.ndim == 1 and len(x) == len(y) > MAX_LINE_POINTS \
+                    and x.dtype.kind in "biuf" and y.dtype.kind in "biuf":
+                idx = decimate(x, y)
+                line.set_data(x[idx], y[idx])
+        except (TypeError, ValueError):  # data matplotlib converts itself (units): drawn as given
+            pass
+        return super().add_line(line)
+
+
+class _DecimatingFigure(Figure):
+    """A Figure whose subplots (also twins and sub-grids) are :class:`_DecimatingAxes`."""
+
+    def add_subplot(self, *args, **kwargs):
+        if "projection" not in kwargs and "polar" not in kwargs:
+            kwargs.setdefault("axes_class", _DecimatingAxes)
+        return super().add_subplot(*args, **kwargs)
 
 
 def _sig(log, name: str) -> np.ndarray | None:
@@ -99,7 +165,7 @@ def _headroom(*axes: Axes, frac: float = 0.3) -> None:
 
 
 def _new_figure(rows: int, cols: int, size: tuple[float, float]) -> tuple[Figure, np.ndarray]:
-    fig = Figure(figsize=size, dpi=_DPI, layout="constrained")
+    fig = _DecimatingFigure(figsize=size, dpi=_DPI, layout="constrained")
     axes = np.asarray(fig.subplots(rows, cols, squeeze=False))
     return fig, axes
 
