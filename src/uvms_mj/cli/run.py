@@ -161,18 +161,20 @@ def run_cmd(scenario: str, sets: tuple[str, ...], out: str | None, video: bool |
     finally:
         if server is not None:
             server.close()
+    status, reason = res.status, res.reason
+    del res  # the run's arrays: the plots and the video read the log (one copy of the signals in memory at a time)
     echo(f"log: {log}")
-    echo(metrics_table({sc.controller.name: m}, {sc.controller.name: res.status}))
+    echo(metrics_table({sc.controller.name: m}, {sc.controller.name: status}))
     if json_out:
-        _write_json(_json_metrics({sc.controller.name: {"status": res.status, "reason": res.reason, "log": str(log),
+        _write_json(_json_metrics({sc.controller.name: {"status": status, "reason": reason, "log": str(log),
                                                         "metrics": m}}, sc.name), json_out)
     if plots if plots is not None else sc.outputs.plots:
         _plots(log, echo)
     if video if video is not None else sc.outputs.video:
         _video(log, log.with_suffix(".mp4"), sc, echo=echo)
-    if res.status != "ok":
-        click.echo(f"{'error' if res.status != 'joint_limit' else 'warning'}: {res.reason}", err=True)
-        sys.exit(exit_code([res.status]))
+    if status != "ok":
+        click.echo(f"{'error' if status != 'joint_limit' else 'warning'}: {reason}", err=True)
+        sys.exit(exit_code([status]))
 
 
 @click.command()
@@ -210,9 +212,10 @@ def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str
         res, path, m = _run_one(sc, path, source=scenario)
         results[name], logs[name], status[name] = m, path, res.status
         runs[name] = {"status": res.status, "reason": res.reason, "log": str(path), "metrics": m}
-        echo(f"log: {path}")
         if res.status != "ok":
             failed.append(f"{name}: {res.reason}")
+        del res  # its arrays (the figure reads the logs)
+        echo(f"log: {path}")
         if video:
             _video(path, path.with_suffix(".mp4"), sc, echo=echo)
     echo(metrics_table(results, status))
