@@ -76,12 +76,13 @@ def _live_server(port: int, pace: str, wait: float):
     return server
 
 
-def _plots(log_path: Path, echo=click.echo) -> None:
-    """The plots of a run's log; a run too short (or too broken) to plot gets a warning."""
+def _plots(log_path: Path, echo=click.echo, data=None) -> None:
+    """The plots of a run's log (``data``: the run itself, which holds the log's signals, else the
+    log is read); a run too short (or too broken) to plot gets a warning."""
     from uvms_mj.analysis.plots import plot_run
 
     try:
-        paths = plot_run(_read(log_path), log_path.parent, stem=log_path.stem)
+        paths = plot_run(data if data is not None else _read(log_path), log_path.parent, stem=log_path.stem)
     except OSError as exc:
         _io_error(log_path.parent, exc)
     except (ValueError, KeyError, IndexError, TypeError) as exc:
@@ -162,14 +163,14 @@ def run_cmd(scenario: str, sets: tuple[str, ...], out: str | None, video: bool |
         if server is not None:
             server.close()
     status, reason = res.status, res.reason
-    del res  # the run's arrays: the plots and the video read the log (one copy of the signals in memory at a time)
     echo(f"log: {log}")
     echo(metrics_table({sc.controller.name: m}, {sc.controller.name: status}))
     if json_out:
         _write_json(_json_metrics({sc.controller.name: {"status": status, "reason": reason, "log": str(log),
                                                         "metrics": m}}, sc.name), json_out)
     if plots if plots is not None else sc.outputs.plots:
-        _plots(log, echo)
+        _plots(log, echo, data=res)  # the run's arrays are the log's, bit for bit: not read back (memory, time)
+    del res  # the video reads the log
     if video if video is not None else sc.outputs.video:
         _video(log, log.with_suffix(".mp4"), sc, echo=echo)
     if status != "ok":
