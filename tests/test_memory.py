@@ -114,7 +114,17 @@ def _same(got: dict, want: dict) -> None:
         assert np.array_equal(a, b, equal_nan=a.dtype.kind == "f"), key
 
 
-def test_sample_record_gives_what_asarray_of_the_rows_gives():
+@pytest.fixture(params=[1024, 4], ids=["one-chunk", "chunks-of-4"])
+def chunk(request, monkeypatch):
+    """SampleRecord's chunk: the run's default, and 4 rows (promotion across chunks: "count" is
+    int in the first chunks and float later; a ragged value in a later chunk)."""
+    from uvms_mj.sim import samples
+
+    monkeypatch.setattr(samples, "CHUNK", request.param)
+    return request.param
+
+
+def test_sample_record_gives_what_asarray_of_the_rows_gives(chunk):
     rows = _rows()
     rec = SampleRecord(len(rows))
     for row in rows:
@@ -135,7 +145,16 @@ def test_sample_record_gives_what_asarray_of_the_rows_gives():
         full.append(rows[1])
 
 
-def test_sample_record_rows_that_do_not_fit_keep_the_list_semantics():
+def test_sample_record_rows_that_do_not_fit_keep_the_list_semantics(chunk):
+    ragged = _rows()
+    ragged[13] = {**ragged[13], "x": np.array([1.0, 2.0, 3.0])}  # another shape: stacked as before (an error)
+    rec = SampleRecord(len(ragged))
+    for row in ragged:
+        rec.append(row)
+    with pytest.raises(ValueError):
+        np.asarray([row["x"] for row in ragged])
+    with pytest.raises(ValueError):
+        rec.signals()
     rows = _rows()
     rows[7] = {k: v for k, v in rows[7].items() if k != "flag"}  # a signal missing in one row
     rows[9] = {**rows[9], "late": 1.0}  # one that appears later
