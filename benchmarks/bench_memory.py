@@ -62,7 +62,8 @@ def main() -> None:
                     f.unlink()
             if len(peaks) > 1 and peaks[-1][0] > peaks[0][0]:
                 (d0, m0), (d1, m1) = peaks[0], peaks[-1]
-                print(f"{name:28s} growth {1000.0 * (m1 - m0) / (d1 - d0):.1f} MB per 1000 s simulated")
+                print(f"{name:28s} growth {1000.0 * (m1 - m0) / (d1 - d0):.1f} MB per 1000 s simulated "
+                      f"({m0:.0f} MB at {d0:g} s -> {m1:.0f} MB at {d1:g} s)")
 
 
 if __name__ == "__main__":
