@@ -45,6 +45,7 @@ import numpy as np
 
 from uvms_mj.physics import model as _pm
 from uvms_mj.plant.errors import ParameterError
+from uvms_mj.plant.robot import add_hydro_instance
 
 __all__ = ["Tether", "TETHER_PREFIX"]
 
@@ -139,9 +140,7 @@ class Tether:
             b.explicitinertial = True
             b.add_geom(type=mujoco.mjtGeom.mjGEOM_CAPSULE, fromto=[0, 0, 0, l, 0, 0], size=[self.diameter / 2, 0, 0],
                        contype=0, conaffinity=0, mass=0.0, density=0.0, rgba=[0.95, 0.75, 0.1, 1], group=1)
-            b.plugin.plugin_name = "uvms.hydro"
-            b.plugin.active = True
-            b.plugin.config = dict(hydro)
+            add_hydro_instance(spec, b, f"{TETHER_PREFIX}_{i}_hydro", hydro)
             parent = b
         parent.add_site(name=f"{TETHER_PREFIX}_end", pos=[l, 0.0, 0.0], size=[0.01, 0, 0], group=4)
         eq = spec.add_equality()  # (keyword arguments to add_equality crash MuJoCo 3.17's bindings)
