@@ -221,8 +221,12 @@ class Plant(Stepping):
                     raise ParameterError(f"tether = {tether!r} must be a uvms_mj.plant.tether.Tether")
                 if planar is not False:
                     raise ParameterError("tether: a free vehicle only (the paper's planar robot has no tether)")
+                robot_model = _pm.compile_spec(spec, native=native, source=path.name)  # (the spec unchanged)
                 tether.add_to(spec, next(j.parent.name for j in spec.joints if j.type == mujoco.mjtJoint.mjJNT_FREE))
             self.model = _pm.compile_spec(spec, native=native, source=path.name)
+            #: The robot's own model, without a tether's chain (:attr:`q` fits it; the log's /tf
+            #: and scene): :attr:`model` itself without a tether.
+            self.robot_model = robot_model if tether is not None else self.model
         except _pm.ModelError as exc:
             raise ParameterError(str(exc)) from None
         self.model_path = path
