@@ -188,3 +188,39 @@ def test_bad_tether_input_is_refused():
         from uvms_mj.plant.layout import InitialState
 
         Plant("bluerov2_alpha", tether=Tether(length=1.0), initial=InitialState(position=(0.0, 0.0, -2.0)))
+
+
+# ----------------------------------------------------------------------------- the scenario section
+
+
+def _scenario(tmp_path, text: str):
+    from uvms_mj.scenario.schema import load_scenario
+
+    p = tmp_path / "s.yaml"
+    p.write_text(text)
+    return load_scenario(p)
+
+
+def test_scenario_tether_section_builds_the_plants_tether(tmp_path):
+    from uvms_mj.scenario.schema import build
+
+    sc = _scenario(tmp_path, "robot: bluerov2_alpha\nduration: 1.0\ninitial: {position: [0, 0, -2]}\n"
+                             "plant:\n  tether: {length: 3.0, segments: 6, ct: 0.02}\n")
+    plant, _ = build(sc)
+    t = plant.tether
+    assert (t.length, t.segments, t.ct, t.diameter, t.mass_per_length, t.cn) == (3.0, 6, 0.02, 0.0075, 0.043, 1.2)
+    assert plant.q.shape == (plant.robot_model.nq,)
+
+
+@pytest.mark.parametrize("body, match", [
+    ("robot: paper\nplant:\n  tether: {length: 3.0}\n", r"plant\.tether: applies to MJCF robots"),
+    ("robot: bluerov2_alpha\nplant:\n  tether: {length: -3.0}\n", r"plant\.tether\.length"),
+    ("robot: bluerov2_alpha\nplant:\n  tether: {length: 3.0, segments: 1}\n", r"plant\.tether\.segments"),
+    ("robot: bluerov2_alpha\nplant:\n  tether: {length: 3.0, lenght: 2}\n", r"plant\.tether.*lenght"),
+])
+def test_scenario_tether_section_refuses_bad_input(tmp_path, body, match):
+    from uvms_mj.scenario.schema import ScenarioError
+
+    with pytest.raises(ScenarioError, match=match) as info:
+        _scenario(tmp_path, body)
+    assert len(str(info.value).splitlines()) <= 3
