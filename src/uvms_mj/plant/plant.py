@@ -55,7 +55,7 @@ from uvms_mj.plant.files import default_model_path, models_dir, robot_path  # no
 from uvms_mj.plant.layout import InitialState, Layout, motor_torques
 from uvms_mj.plant.params import ParameterError, RobotParams, read_params
 from uvms_mj.plant.robot import Payload, _is_planar_spec, apply_model_overrides
-from uvms_mj.plant.tether import TETHER_PREFIX, Tether, tether_dofs, tether_pull
+from uvms_mj.plant.tether import TETHER_PREFIX, Tether, add_tether, tether_dofs, tether_pull
 from uvms_mj.plant.stepping import (  # noqa: F401  (DivergenceError, Energy, mujoco_warnings: re-exported)
     DivergenceError,
     Energy,
@@ -216,13 +216,7 @@ class Plant(Stepping):
                 payload.add_to(spec, site)
             for edit in spec_edits:
                 edit(spec)
-            if tether is not None:
-                if not isinstance(tether, Tether):
-                    raise ParameterError(f"tether = {tether!r} must be a uvms_mj.plant.tether.Tether")
-                if planar is not False:
-                    raise ParameterError("tether: a free vehicle only (the paper's planar robot has no tether)")
-                robot_model = _pm.compile_spec(spec, native=native, source=path.name)  # (the spec unchanged)
-                tether.add_to(spec, next(j.parent.name for j in spec.joints if j.type == mujoco.mjtJoint.mjJNT_FREE))
+            robot_model = add_tether(spec, tether, native=native, source=path.name) if tether is not None else None
             self.model = _pm.compile_spec(spec, native=native, source=path.name)
             #: The robot's own model, without a tether's chain (:attr:`q` fits it; the log's /tf
             #: and scene): :attr:`model` itself without a tether.

@@ -47,7 +47,7 @@ from uvms_mj.physics import model as _pm
 from uvms_mj.plant.errors import ParameterError
 from uvms_mj.plant.robot import add_hydro_instance
 
-__all__ = ["Tether", "TETHER_PREFIX"]
+__all__ = ["TETHER_PREFIX", "Tether", "add_tether", "tether_dofs", "tether_pull"]
 
 #: Names of the tether's elements: ``tether_0``... (bodies, joints), ``tether_end``,
 #: ``tether_attach`` (sites), ``tether_connect`` (the equality).
@@ -213,6 +213,22 @@ class Tether:
             d.qvel[m.jnt_dofadr[j]:m.jnt_dofadr[j] + 3] = 0.0
             R_prev = R
         mujoco.mj_kinematics(m, d)
+
+
+def add_tether(spec: mujoco.MjSpec, tether: Tether, *, native: bool | None, source: str) -> mujoco.MjModel:
+    """Add ``tether`` to a robot's spec, connected to its free vehicle; returns the robot's own model
+    compiled before (without the chain: :attr:`uvms_mj.plant.plant.Plant.robot_model`).
+
+    Raises:
+        ParameterError: not a Tether, or a robot without a free vehicle (the paper's planar one)."""
+    if not isinstance(tether, Tether):
+        raise ParameterError(f"tether = {tether!r} must be a uvms_mj.plant.tether.Tether")
+    free = [j.parent.name for j in spec.joints if j.type == mujoco.mjtJoint.mjJNT_FREE]
+    if len(free) != 1:
+        raise ParameterError("tether: a free vehicle only (the paper's planar robot has no tether)")
+    robot_model = _pm.compile_spec(spec, native=native, source=source)  # (compiling leaves the spec as it is)
+    tether.add_to(spec, free[0])
+    return robot_model
 
 
 def tether_pull(m: mujoco.MjModel, d: mujoco.MjData) -> np.ndarray:

@@ -211,7 +211,8 @@ class PayloadSection(_Section):
 
 class TetherSection(_Section):
     """A tether from a surface point to the vehicle (:class:`uvms_mj.plant.tether.Tether`, MJCF robots with a free
-    vehicle), unknown to the nominal model; defaults: von Benzon et al. 2022's tether (J. Mar. Sci. Eng. 10(12) 1898)."""
+    vehicle), unknown to the nominal model; defaults: von Benzon et al. 2022's tether (J. Mar. Sci. Eng. 10(12)
+    1898)."""
 
     length: float = Field(gt=0, le=POSITION_MAX, description="[m]")
     segments: int = Field(20, ge=2, le=200, description="rigid segments of length / segments")
