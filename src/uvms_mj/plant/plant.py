@@ -217,7 +217,8 @@ class Plant(Stepping):
             for edit in spec_edits:
                 edit(spec)
             robot_model = add_tether(spec, tether, native=native, source=path.name) if tether is not None else None
-            self.model = _pm.compile_spec(spec, native=native, source=path.name)
+            # (a tether's joints pad the file's keyframes with qpos0; add_tether checked them as written)
+            self.model = _pm.compile_spec(spec, native=native, source=path.name, check_keyframes=tether is None)
             #: The robot's own model, without a tether's chain (:attr:`q` fits it; the log's /tf
             #: and scene): :attr:`model` itself without a tether.
             self.robot_model = robot_model if tether is not None else self.model
