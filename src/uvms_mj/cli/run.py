@@ -33,7 +33,7 @@ def _run_one(scenario, out: Path, progress: bool = True, source: str | None = No
         from uvms_mj.scenario.robot import robot_info
 
         meta["robot"] = robot_info(scenario, plant)
-        rec_kw["model"] = plant.model
+        rec_kw["model"] = getattr(plant, "robot_model", plant.model)  # without a tether's chain: q_true fits it
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
         with _progress(f"{scenario.name} [{scenario.controller.name}]", "sample") as tick, handle_sigterm(), \

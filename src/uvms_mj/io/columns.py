@@ -11,7 +11,8 @@ component, which the exports use as column names (``q_true[alpha_shoulder]``,
 * ``qd_true``, ``qdd_desired``, ``zeta_ref``, ``reference_lead`` (qvel): a free vehicle's
   ``base_vx`` .. ``base_vz`` (world) and ``base_wx`` .. ``base_wz`` (body frame); a planar base's
   as qpos; then the joints by name.
-* ``tip_true``, ``tip_desired``, ``tip_measured``, ``e_position``, ``e_tip``, ``wave_velocity``:
+* ``tip_true``, ``tip_desired``, ``tip_measured``, ``e_position``, ``e_tip``, ``wave_velocity``,
+  ``tether_pull``:
   ``x``, ``y``, ``z`` (the paper's tip: ``x``, ``y``).
 * ``base_desired``: ``x``, ``y``, ``z``, ``qw``, ``qx``, ``qy``, ``qz``.
 * ``e_attitude``: ``roll``, ``pitch``, ``yaw``: rotation-vector components about x, y, z (for
@@ -48,7 +49,7 @@ _XYZ = ["x", "y", "z"]
 _RPY = ["roll", "pitch", "yaw"]
 _WRENCH_3D = ["fx", "fy", "fz", "mx", "my", "mz"]
 _WRENCH_PLANAR = ["fx", "fy", "mz"]
-_TIP = ("tip_true", "tip_desired", "tip_measured", "e_position", "e_tip", "wave_velocity")
+_TIP = ("tip_true", "tip_desired", "tip_measured", "e_position", "e_tip", "wave_velocity", "tether_pull")
 _THRUST = ("thrust_command", "thrust_force", "thrust_saturated")
 _JOINT = ("joints_desired", "e_posture", "f_M_hat")
 _WRENCH = ("u_B", "u_B_applied", "f_E_hat", "wrench_body", "wrench_achieved")

@@ -53,10 +53,11 @@ class _Struct(ctypes.Structure):
 class PlantIO:
     """The arrays of one plant that the compiled sample reads and writes: ``tip_site`` and
     ``ntip`` (0: no tip readout); ``thr_act``, ``lo``, ``hi``: the thrusters' lag states and
-    force ranges (empty: no thrust readout)."""
+    force ranges (empty: no thrust readout); ``robot``: (nq, nv) of the robot's part of the state
+    that q and qd are read from (a prefix: without a tether's coordinates; None: all)."""
 
     def __init__(self, fn, model, data, scratch, snapshot: np.ndarray, snap_spec: int, tip_site: int, ntip: int,
-                 thr_act=(), lo=(), hi=()) -> None:
+                 thr_act=(), lo=(), hi=(), robot: tuple[int, int] | None = None) -> None:
         self.fn, self.model, self.data, self.scratch = fn, model, data, scratch
         self.thr_act = np.ascontiguousarray(thr_act if len(thr_act) else [0], dtype=np.intc)
         self.lo = np.ascontiguousarray(lo if len(lo) else [0.0], dtype=float)
@@ -66,7 +67,8 @@ class PlantIO:
         self.out = np.zeros(self.nq + self.nv + ntip + self.nthr)
         nq, nv = self.nq, self.nv
         #: where q, qd, the tip and the thrusts are in :attr:`out` (None: not read here)
-        self.slices = (slice(0, nq), slice(nq, nq + nv), slice(nq + nv, nq + nv + ntip) if ntip else None,
+        rq, rv = robot if robot is not None else (nq, nv)
+        self.slices = (slice(0, rq), slice(nq, nq + rv), slice(nq + nv, nq + nv + ntip) if ntip else None,
                        slice(nq + nv + ntip, nq + nv + ntip + self.nthr) if self.nthr else None)
         self.snapshot = snapshot
         self._struct = _Struct(model._address, data._address, scratch._address, snapshot.ctypes.data, int(snap_spec),

@@ -85,9 +85,11 @@ class Layout:
         return 7 if self.base_free else int(self.base_dofs.size)
 
     @classmethod
-    def of(cls, m: mujoco.MjModel, tip_site: str | None = None, allow_planar: bool = False) -> "Layout":
+    def of(cls, m: mujoco.MjModel, tip_site: str | None = None, allow_planar: bool = False,
+           exclude: str | None = None) -> "Layout":
         """The layout of ``m``; ``tip_site``: the end-effector site (default: the first site
-        whose name ends in "tip", or none).
+        whose name ends in "tip", or none); ``exclude``: a body whose subtree is not the robot's
+        (a tether's chain, :mod:`uvms_mj.plant.tether`: its joints and bodies are left out).
 
         The vehicle is the body carrying a free joint; without one (``allow_planar``), the first
         child of the world that carries joints, with all its joints (slides and hinges, e.g. the
@@ -97,20 +99,29 @@ class Layout:
             ParameterError: no free joint (and not ``allow_planar``), more than one, or an
                 unknown ``tip_site``.
         """
-        free = [j for j in range(m.njnt) if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
+        out = set()
+        if exclude is not None:
+            root = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, exclude)
+            if root < 0:
+                raise ParameterError(f"exclude = {exclude!r}: no body of that name")
+            for b in range(root, m.nbody):  # a subtree's bodies follow its root in body order
+                if b == root or int(m.body_parentid[b]) in out:
+                    out.add(b)
+        robot_joints = [j for j in range(m.njnt) if int(m.jnt_bodyid[j]) not in out]
+        free = [j for j in robot_joints if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_FREE]
         if len(free) > 1 or (not free and not allow_planar):
             raise ParameterError(f"the robot model must have exactly one free joint (the vehicle), it has {len(free)}")
         if free:
             base_joints = [free[0]]
         else:
-            roots = [b for b in range(1, m.nbody) if m.body_parentid[b] == 0 and m.body_jntnum[b] > 0]
+            roots = [b for b in range(1, m.nbody) if m.body_parentid[b] == 0 and m.body_jntnum[b] > 0 and b not in out]
             if not roots:
                 raise ParameterError("the robot model has no vehicle: no body on a free joint nor a child of the "
                                      "world with joints")
             b0 = roots[0]
             base_joints = list(range(m.body_jntadr[b0], m.body_jntadr[b0] + m.body_jntnum[b0]))
         jf = base_joints[0]
-        others = [j for j in range(m.njnt) if j not in base_joints]
+        others = [j for j in robot_joints if j not in base_joints]
         for j in others:
             if m.jnt_type[j] == mujoco.mjtJoint.mjJNT_BALL:
                 raise ParameterError(f"joint {_name(m, mujoco.mjtObj.mjOBJ_JOINT, j)!r}: ball joints are not "
@@ -155,7 +166,7 @@ class Layout:
             motor_names=tuple(_name(m, A, a) for a in mot), motor_ids=np.array(mot, dtype=int),
             motor_joints=tuple(_name(m, J, int(m.actuator_trnid[a][0])) for a in mot),
             tip_site=int(tip), tip_name=site_names[tip] if tip >= 0 else "",
-            body_names=tuple(_name(m, mujoco.mjtObj.mjOBJ_BODY, b) for b in range(1, m.nbody)),
+            body_names=tuple(_name(m, mujoco.mjtObj.mjOBJ_BODY, b) for b in range(1, m.nbody) if b not in out),
         )
 
     def describe(self) -> dict:

@@ -55,6 +55,7 @@ from uvms_mj.plant.files import default_model_path, models_dir, robot_path  # no
 from uvms_mj.plant.layout import InitialState, Layout, motor_torques
 from uvms_mj.plant.params import ParameterError, RobotParams, read_params
 from uvms_mj.plant.robot import Payload, _is_planar_spec, apply_model_overrides
+from uvms_mj.plant.tether import TETHER_PREFIX, Tether, add_tether, tether_dofs, tether_pull
 from uvms_mj.plant.stepping import (  # noqa: F401  (DivergenceError, Energy, mujoco_warnings: re-exported)
     DivergenceError,
     Energy,
@@ -128,6 +129,12 @@ class Plant(Stepping):
         failures: thrusters failing during the run (:class:`ThrusterFailure`).
         spec_edits: callables applied to the model's MjSpec before it is compiled, after the
             overrides (e.g. :func:`uvms_mj.sim.navsensors.add_to_spec`: MuJoCo sensors, a seabed).
+        tether: a tether from a surface point to the vehicle (:class:`~uvms_mj.plant.tether.Tether`;
+            a free vehicle only): a chain of its own appended to the model, placed at every
+            :meth:`reset`; :attr:`q`, :attr:`qd` and everything the controllers see are the
+            robot's coordinates only (a prefix of ``qpos`` / ``qvel``), the tether's pull is
+            logged (:meth:`sea_signals`: ``tether_pull``). The divergence check (``max_speed``)
+            sums the tether's joint rates too (a runaway chain is a divergence).
 
     Raises:
         ParameterError: missing file, missing element, a non-physical parameter or an
@@ -155,6 +162,7 @@ class Plant(Stepping):
         payload: Payload | None = None,
         failures: Sequence[ThrusterFailure] = (),
         spec_edits: Sequence[Any] = (),
+        tether: Tether | None = None,
     ) -> None:
         install_mujoco_warning_handler()
         path = default_model_path() if model is None else robot_path(model)
@@ -208,7 +216,12 @@ class Plant(Stepping):
                 payload.add_to(spec, site)
             for edit in spec_edits:
                 edit(spec)
-            self.model = _pm.compile_spec(spec, native=native, source=path.name)
+            robot_model = add_tether(spec, tether, native=native, source=path.name) if tether is not None else None
+            # (a tether's joints pad the file's keyframes with qpos0; add_tether checked them as written)
+            self.model = _pm.compile_spec(spec, native=native, source=path.name, check_keyframes=tether is None)
+            #: The robot's own model, without a tether's chain (:attr:`q` fits it; the log's /tf
+            #: and scene): :attr:`model` itself without a tether.
+            self.robot_model = robot_model if tether is not None else self.model
         except _pm.ModelError as exc:
             raise ParameterError(str(exc)) from None
         self.model_path = path
@@ -218,7 +231,11 @@ class Plant(Stepping):
         self.backend = "native" if native else "python"
         self.hydro_info = _pm.hydro_of(m)
         #: The named pieces of the model (:class:`~uvms_mj.plant.layout.Layout`).
-        self.layout = lay = Layout.of(m, tip_site, allow_planar=True)
+        self.layout = lay = Layout.of(m, tip_site, allow_planar=True,
+                                      exclude=f"{TETHER_PREFIX}_0" if tether is not None else None)
+        #: The tether (None: none) and the robot's part of qpos / qvel (all of them without one).
+        self.tether = tether
+        self._nq, self._nv = tether_dofs(m)
         #: The paper robot's planar parameters (:class:`~uvms_mj.plant.params.RobotParams`) for a
         #: planar robot that has them, else None.
         self.params: RobotParams | None = None
@@ -370,6 +387,8 @@ class Plant(Stepping):
             if k < 0:
                 raise ParameterError(f"model has no keyframe named {keyframe!r}")
             mujoco.mj_resetDataKeyframe(m, d, k)
+        if self.tether is not None:
+            self.tether.place(m, d)
         d.time = 0.0
         self._diverged = None
         served = self._serving.get(d._address)
@@ -383,8 +402,13 @@ class Plant(Stepping):
 
     def sea_signals(self) -> dict:
         """The waves at the vehicle now (``wave_elevation``, ``wave_velocity``; empty without
-        waves), for the sampled loop's log (:mod:`uvms_mj.plant.sea`)."""
-        return self.sea.signals(float(self.data.time), self.data.qpos)
+        waves), for the sampled loop's log (:mod:`uvms_mj.plant.sea`); with a tether also
+        ``tether_pull``: its force on the vehicle, world [N] (:func:`uvms_mj.plant.tether.tether_pull`,
+        the constraint force of the last step's evaluation)."""
+        out = self.sea.signals(float(self.data.time), self.data.qpos)
+        if self.tether is not None:
+            out["tether_pull"] = tether_pull(self.model, self.data)
+        return out
 
     def on_sample(self, t: float) -> None:
         """Called by the sampled loop at every control sample (time t [s]): the scheduled events
@@ -453,15 +477,15 @@ class Plant(Stepping):
 
     @property
     def q(self) -> np.ndarray:
-        """Generalized coordinates ``qpos`` (copy; module docstring): the paper's
-        (p0x, p0y, phi0, phi1, phi2) [m, m, rad, rad, rad]."""
-        return self.data.qpos.copy()
+        """Generalized coordinates ``qpos`` (copy; module docstring; the robot's only, without a
+        tether's): the paper's (p0x, p0y, phi0, phi1, phi2) [m, m, rad, rad, rad]."""
+        return self.data.qpos[:self._nq].copy()
 
     @property
     def qd(self) -> np.ndarray:
         """Generalized velocities ``qvel`` (copy): base velocity (planar: world; free: linear
-        world, angular body), joint rates."""
-        return self.data.qvel.copy()
+        world, angular body), joint rates (the robot's only, without a tether's)."""
+        return self.data.qvel[:self._nv].copy()
 
     @property
     def base_pose(self) -> np.ndarray:

@@ -163,7 +163,8 @@ class Stepping:
         tip_site, ntip, thr_act, lo, hi = self._io_layout()
         io = self._io = plant_io.PlantIO(fn, m, self.data, self._scratch, self._snapshot, int(_SNAPSHOT), tip_site,
                                          ntip, () if thr_act is None else thr_act, () if lo is None else lo,
-                                         () if hi is None else hi)
+                                         () if hi is None else hi,
+                                         (getattr(self, "_nq", m.nq), getattr(self, "_nv", m.nv)))
         return io
 
     # ---------------------------------------------------------------- stepping

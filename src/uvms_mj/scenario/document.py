@@ -36,6 +36,8 @@ A null default is the robot's own, filled in when the scenario is validated (``u
       gravity: true
       current: null             # world [m/s] (older spelling of current.velocity); null: still water
       payload: null             # {mass, t, site, ...}: picked up during the run
+      tether: null              # MJCF robots: {length, segments, anchor, attach, diameter, mass_per_length,
+                                #   cn, ct, added_mass, damping, surface} (von Benzon et al. 2022's defaults)
     current: null               # {velocity} | {gauss_markov: {...}} | {profile: [...]}
     waves: null                 # {model: airy|jonswap|pierson_moskowitz, height|hs, period|tp, gamma,
                                 #   direction, spreading, depth (null: deep), surface, seed, n_components}

@@ -143,6 +143,9 @@ def paper_plant_issues(pl) -> list:
     if pl.overrides_file is not None:
         issues.append((("overrides_file",), "applies to MJCF robots; on the paper's robot give plant.overrides",
                        pl.overrides_file))
+    if pl.tether is not None:
+        issues.append((("tether",), "applies to MJCF robots with a free vehicle (the paper's planar robot has no "
+                       "tether)", _NO_VALUE))
     return issues
 
 

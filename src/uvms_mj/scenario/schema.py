@@ -457,6 +457,7 @@ def build(scenario: Scenario) -> tuple[Plant, Any]:
             failures=[f.failure() for f in th.failures],
             payload=pl.payload.payload() if pl.payload is not None else None,
             spec_edits=[add_to_spec(nav)] if (nav := nav_config(sc)) is not None else (),
+            tether=pl.tether.tether() if pl.tether is not None else None,
         )
         robot = nominal_robot(sc)
         name = sc.controller.name

@@ -23,8 +23,8 @@ from uvms_mj.rotations import quat_from_rpy
 from uvms_mj.scenario.base import _NO_VALUE as _NO
 from uvms_mj.scenario.base import CURRENT_MAX, DURATION_MAX, FORCE_MAX, SEED_MAX, TAU_MAX, Hydro, _Issues, _Section
 
-__all__ = ["CurrentSection", "Failure", "Initial", "Orientation", "PayloadSection", "PlantSection", "Setpoint", "ThrustersSection",
-           "Vehicle", "WavesSection"]
+__all__ = ["CurrentSection", "Failure", "Initial", "Orientation", "PayloadSection", "PlantSection", "Setpoint",
+           "TetherSection", "ThrustersSection", "Vehicle", "WavesSection"]
 
 #: Bounds (as the paper scenario's).
 POSITION_MAX = 1000.0  # [m] |initial.position|, |vehicle.setpoint.position|
@@ -209,6 +209,33 @@ class PayloadSection(_Section):
                        volume=self.volume)
 
 
+class TetherSection(_Section):
+    """A tether from a surface point to the vehicle (:class:`uvms_mj.plant.tether.Tether`, MJCF robots with a free
+    vehicle), unknown to the nominal model; defaults: von Benzon et al. 2022's tether (J. Mar. Sci. Eng. 10(12)
+    1898)."""
+
+    length: float = Field(gt=0, le=POSITION_MAX, description="[m]")
+    segments: int = Field(20, ge=2, le=200, description="rigid segments of length / segments")
+    anchor: Vec3 | None = Field(None, description="world point of the upper end [m]; null: straight above the "
+                                "vehicle's initial attachment point at z = surface")
+    attach: Vec3 = Field(default_factory=lambda: [0.0, 0.0, 0.0], description="on the vehicle, body frame [m]")
+    diameter: float = Field(0.0075, gt=0, le=1.0, description="[m] (von Benzon et al. 2022: 7.5 mm)")
+    mass_per_length: float = Field(0.043, gt=0, le=100.0, description="[kg/m] (von Benzon et al. 2022: 0.043)")
+    cn: float = Field(1.2, ge=0, le=10.0, description="normal drag coefficient (von Benzon et al. 2022: 1.2)")
+    ct: float = Field(0.01, ge=0, le=10.0, description="tangential drag coefficient (von Benzon et al. 2022: 0.01)")
+    added_mass: bool = Field(True, description="the segments' potential-flow added mass (Ca = 1 across)")
+    damping: float = Field(0.0, ge=0, le=100.0, description="joint damping of the chain [N m s/rad] (ours; 0: none)")
+    surface: float = Field(0.0, ge=-POSITION_MAX, le=POSITION_MAX, description="world z of the default anchor [m]")
+
+    def tether(self):
+        from uvms_mj.plant.tether import Tether
+
+        return Tether(length=self.length, segments=self.segments,
+                      anchor=tuple(self.anchor) if self.anchor is not None else None, attach=tuple(self.attach),
+                      diameter=self.diameter, mass_per_length=self.mass_per_length, cn=self.cn, ct=self.ct,
+                      added_mass=self.added_mass, damping=self.damping, surface=self.surface)
+
+
 class PlantSection(_Section):
     """The simulated truth, for every robot (what applies to one kind only says so)."""
 
@@ -227,6 +254,8 @@ class PlantSection(_Section):
     seabed_depth: float | None = Field(None, gt=0, le=11000.0, description=(
         "robots with a free vehicle: a flat seabed (a plane geom, no contacts) at world z = -seabed_depth [m], "
         "for the navigation DVL's beams; null: the model's own scene"))
+    tether: TetherSection | None = Field(None, description="MJCF robots: a tether from a surface point to the "
+                                         "vehicle (von Benzon et al. 2022's by default)")
 
 
 class ThrustersSection(_Section):
