@@ -171,16 +171,40 @@ def partial_output(path: str | os.PathLike) -> Iterator[Path]:
                 pass
 
 
-def _children() -> list[int]:
-    """This process's child processes (Linux: /proc; elsewhere none known)."""
+#: Children left alone by :func:`exit_now`: Ray's reaper, which ends the local Ray cluster's
+#: process group (its workers included) when this process is gone.
+_KEEP_CHILDREN = (b"ray_process_reaper",)
+
+
+def _kids(pid: int | str) -> list[int]:
     kids: list[int] = []
     try:
-        for task in os.listdir("/proc/self/task"):
-            with open(f"/proc/self/task/{task}/children", encoding="ascii") as f:
+        for task in os.listdir(f"/proc/{pid}/task"):
+            with open(f"/proc/{pid}/task/{task}/children", encoding="ascii") as f:
                 kids += [int(k) for k in f.read().split()]
     except OSError:
         pass
     return kids
+
+
+def _children() -> list[int]:
+    """This process's descendants to kill, parents first (Linux: /proc; elsewhere none known):
+    a sweep's workers, ffmpeg, a local Ray cluster's processes and their workers and agents;
+    not those of :data:`_KEEP_CHILDREN`."""
+    out: list[int] = []
+    todo = _kids("self")
+    while todo:
+        pid = todo.pop(0)
+        try:
+            with open(f"/proc/{pid}/cmdline", "rb") as f:
+                cmd = f.read()
+        except OSError:
+            continue
+        if pid in out or any(k in cmd for k in _KEEP_CHILDREN):
+            continue
+        out.append(pid)
+        todo += _kids(pid)
+    return out
 
 
 def exit_now(message: bool = True) -> None:

@@ -260,12 +260,14 @@ def _engine_ray(tasks: list[dict], workers: int, done: Callable[[dict, dict], No
     except ImportError:
         raise SweepError(RAY_MISSING) from None
     started = False
+    handlers = _signal_handlers()
     if not ray.is_initialized():
         if os.environ.get("RAY_ADDRESS"):
             ray.init(log_to_driver=False)
         else:
             ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
         started = True
+    _reclaim_signals(handlers)
     interrupted = False
     try:
         remote = ray.remote(num_cpus=1, max_retries=MAX_ATTEMPTS - 1)(execute_run)
@@ -301,6 +303,26 @@ def _engine_ray(tasks: list[dict], workers: int, done: Callable[[dict, dict], No
             # Interrupted, the sweep writes its table first: Ray's own exit handler (or the command
             # line's watchdog, which kills the child processes) ends the local cluster after.
             ray.shutdown()
+
+
+def _signal_handlers() -> dict:
+    import signal
+
+    return {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+
+def _reclaim_signals(handlers: dict) -> None:
+    """Put back this process's handlers of SIGINT and SIGTERM (``handlers``, from before
+    ray.init): Ray installs its own in the driver (SIGTERM: exit 1, or abort with rc -6 from its
+    C++ handler), which would bypass the sweep's interrupt (rows written, exit 130)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for sig, handler in handlers.items():
+        if handler is not None:
+            signal.signal(sig, handler)
 
 
 _ENGINES = {"process": _engine_process, "ray": _engine_ray, "serial": _engine_serial}
