@@ -246,3 +246,19 @@ def test_sweep_mid(sig, tmp_path):
 def test_sweep_ray_mid(tmp_path):
     pytest.importorskip("ray")
     _sweep(tmp_path, signal.SIGTERM, "mid", engine="ray")
+
+
+@linux_only
+@pytest.mark.parametrize("sig", SIGNALS, ids=lambda s: s.name)
+def test_render_mid_video(sig, long_log, tmp_path):
+    """render, signalled while ffmpeg writes the MP4: 130, ffmpeg gone, no MP4 left (a video cut
+    short is not the requested output)."""
+    mp4 = tmp_path / "v.mp4"
+    p = _start(tmp_path, "render", str(long_log), "-o", str(mp4))
+    _wait_for(lambda: mp4.exists(), p)
+    if p.poll() is not None and p.returncode == 4:
+        pytest.skip("rendering unavailable here")
+    running, err = _signal(p, sig, tmp_path)
+    _check_rc(p, running, err)
+    if p.returncode == 130:
+        assert not mp4.exists()
