@@ -58,6 +58,7 @@ from uvms_mj.analysis.sim2real import (
     score_trial,
     simulate_trial,
 )
+from uvms_mj.io.interrupts import partial_output
 
 __all__ = ["run_trials", "PARAMETERS", "DEFAULT_PARAMS", "Parameter", "IdentifyResult", "cross_validate", "identify",
            "nominal_values", "overrides_for", "write_overrides"]
@@ -423,7 +424,8 @@ def write_overrides(path: str | Path, overrides: Mapping[str, Any], header: str 
                  [float(x) for x in v] if isinstance(v, (list, tuple)) else float(v)) for k, v in overrides.items()}
     text = "".join(f"# {line}\n" for line in header.splitlines()) + yaml.safe_dump(clean, sort_keys=True,
                                                                                      default_flow_style=None)
-    p.write_text(text)
+    with partial_output(p):
+        p.write_text(text)
     return p
 
 

@@ -88,6 +88,21 @@ def _open_writer(out_path: Path, width: int, height: int, fps: float):
     return writer
 
 
+def _close_writer(writer, finished: bool) -> None:
+    """Let ffmpeg finish the MP4 (``finished``), or kill it at once (an interrupt or an error: no
+    waiting for the encoder; the caller removes the file, e.g. with
+    :func:`uvms_mj.io.interrupts.partial_output`)."""
+    if writer is None:
+        return
+    if finished:
+        writer.close()
+        return
+    try:
+        writer.throw(KeyboardInterrupt)  # imageio-ffmpeg kills ffmpeg on KeyboardInterrupt, then re-raises it
+    except (KeyboardInterrupt, StopIteration):
+        pass
+
+
 def render_video(
     log,
     out_path: str | Path,
@@ -144,7 +159,7 @@ def render_video(
     t_start = time.perf_counter()
     replay = _replay(log, fps, (width, height), camera, speed, max_seconds, model_path, clock=True, labels=labels)
     setup_s = time.perf_counter() - t_start
-    render_s, n, writer = 0.0, 0, None
+    render_s, n, writer, finished = 0.0, 0, None, False
     try:
         out_path.parent.mkdir(parents=True, exist_ok=True)
         writer = _open_writer(out_path, width, height, fps)
@@ -159,10 +174,10 @@ def render_video(
             n += 1
             if on_frame is not None:
                 on_frame(n - 1, len(replay))
+        finished = True
     finally:
         replay.close()
-        if writer is not None:
-            writer.close()
+        _close_writer(writer, finished)
     wall = time.perf_counter() - t_start
     return {
         "path": str(out_path),
@@ -279,7 +294,7 @@ def render_compare_video(
     setup_s = time.perf_counter() - t_start
     total = max(len(a), len(b))
     frame = np.zeros((height + (strip if err is not None else 0), 2 * half, 3), dtype=np.uint8)
-    render_s, n, writer = 0.0, 0, None
+    render_s, n, writer, finished = 0.0, 0, None, False
     try:
         out_path.parent.mkdir(parents=True, exist_ok=True)
         writer = _open_writer(out_path, frame.shape[1], frame.shape[0], fps)
@@ -299,11 +314,11 @@ def render_compare_video(
             n += 1
             if on_frame is not None:
                 on_frame(i, total)
+        finished = True
     finally:
         a.close()
         b.close()
-        if writer is not None:
-            writer.close()
+        _close_writer(writer, finished)
     return {
         "path": str(out_path),
         "frames": n,

@@ -60,6 +60,7 @@ from uvms_mj.analysis.trials import (
     lowpass,
     roll_pitch_yaw,
 )
+from uvms_mj.io.interrupts import partial_output
 
 __all__ = [
     "DEFAULT_MODEL",
@@ -593,6 +594,7 @@ def plot_trial(trial: Trial, sim: SimResult, score: TrialScore | None, path: str
     fig.suptitle(title or f"trial {trial.name}", fontsize=10)
     fig.tight_layout()
     p = Path(path)
-    fig.savefig(p, dpi=dpi)
+    with partial_output(p):
+        fig.savefig(p, dpi=dpi)
     plt.close(fig)
     return p

@@ -132,8 +132,11 @@ def _write_json(data: dict, dest: str) -> None:
     if dest == "-":
         click.echo(text)
     else:
+        from uvms_mj.io.interrupts import partial_output
+
         Path(dest).parent.mkdir(parents=True, exist_ok=True)
-        Path(dest).write_text(text + "\n")
+        with partial_output(dest):
+            Path(dest).write_text(text + "\n")
 
 
 class ScenarioPath(click.ParamType):

@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from uvms_mj.cli.common import EXIT_RENDER, _check_dir, _check_out, _io_error, _progress, _read
+from uvms_mj.io.interrupts import partial_output
 
 
 @click.command()
@@ -43,7 +44,7 @@ def render(logs: tuple[str, ...], out: str | None, out_old: str | None, compare:
     _check_out(path, protect=logs, kind="video", magic=None)
     runs = [_read(p) for p in logs]
     try:
-        with _progress(f"render {path.name}", "frame") as tick:
+        with _progress(f"render {path.name}", "frame") as tick, partial_output(path):
             if compare:
                 info = render_compare_video(runs[0], runs[1], path, fps=fps, size=size or (1280, 480), on_frame=tick,
                                             camera=camera)

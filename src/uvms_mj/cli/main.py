@@ -26,17 +26,25 @@ import sys
 
 
 def _exit_130(*_) -> None:
-    """SIGINT: exit 130 at once, quietly (no KeyboardInterrupt traceback, none swallowed by an
-    import lock's callback)."""
+    """SIGINT or SIGTERM while the command line starts (its imports): exit 130 at once, quietly
+    (no KeyboardInterrupt traceback, none swallowed by an import lock's callback; nothing is
+    written yet)."""
     sys.stderr.write("interrupted\n")
     os._exit(130)
 
 
-if __name__ == "__main__" or (sys.argv and os.path.basename(sys.argv[0]) == "uvms-mj"):
-    # The command line's own process starting up (never a module that imports this one): a Ctrl-C
-    # during its imports exits 130 quietly, and without a display MUJOCO_GL is set to a headless
+#: This process is the command line's own (``python -m uvms_mj.cli.main`` or the installed
+#: ``uvms-mj``), never a module that imports this one (a test runner): only then are signals
+#: handled from the start and the watchdog of :func:`uvms_mj.io.interrupts.cli_signals` armed.
+_CLI_PROCESS = ((__name__ == "__main__" or bool(sys.argv and os.path.basename(sys.argv[0]) == "uvms-mj"))
+                and "--multiprocessing-fork" not in getattr(sys, "orig_argv", ()))  # not a sweep's spawned worker
+
+if _CLI_PROCESS:
+    # As early as possible (before click, numpy, mujoco are imported): Ctrl-C or SIGTERM during
+    # the imports exits 130 quietly, and without a display MUJOCO_GL is set to a headless
     # backend before mujoco is imported (no GLFW probe; its children, e.g. sweep workers, inherit it).
     signal.signal(signal.SIGINT, _exit_130)
+    signal.signal(signal.SIGTERM, _exit_130)
     from uvms_mj.analysis.render_gl import configure_gl
 
     configure_gl()
@@ -56,21 +64,31 @@ from uvms_mj.cli.study import sweep
 
 
 class _Group(click.Group):
-    """Ctrl-C anywhere exits with 130, not click's "Aborted!" with 1: while the command runs a
-    SIGINT handler exits 130 at once, quietly (:func:`_exit_130`, restored when it returns; the
-    installed command's process has it from its start); runs and sweeps replace it with
-    :func:`uvms_mj.io.interrupts.handle_sigterm`, which closes the log first. A bad
+    """SIGINT or SIGTERM anywhere exits with 130, not click's "Aborted!" with 1 nor death by the
+    signal: while the command runs :func:`uvms_mj.io.interrupts.cli_signals` turns them into
+    KeyboardInterrupt (logs close with status "interrupted", a sweep stops its workers and writes
+    the rows of its finished runs, files being written are removed) and, in the command line's
+    own process, a watchdog ends the process GRACE_S (1.5 s) after the signal if that path has
+    not; whatever the command was doing, a command that got the signal exits 130. A bad
     ``UVMS_MJ_COMPILED`` (or a former switch set) is one line and exit 2."""
 
     def main(self, *args, **kwargs):  # noqa: ANN002, ANN003
-        try:
-            old = signal.signal(signal.SIGINT, _exit_130)
-        except ValueError:  # not the main thread: signals are not ours to handle
-            return super().main(*args, **kwargs)
-        try:
-            return super().main(*args, **kwargs)
-        finally:
-            signal.signal(signal.SIGINT, old)
+        from uvms_mj.io.interrupts import cli_signals, exit_now, signalled
+
+        with cli_signals(watchdog=_CLI_PROCESS):
+            try:
+                rv = super().main(*args, **kwargs)
+            except SystemExit as exc:
+                if signalled():
+                    if exc.code != EXIT_INTERRUPTED:  # e.g. an exit code set while the signal unwound the command
+                        click.echo("interrupted", err=True)
+                    if _CLI_PROCESS:  # the command has closed its outputs: no teardown (it can take a second)
+                        exit_now(message=False)
+                    sys.exit(EXIT_INTERRUPTED)
+                raise
+            if signalled():
+                _interrupted()  # standalone_mode=False: the command returned after the signal
+            return rv
 
     def make_context(self, *args, **kwargs):  # noqa: ANN002, ANN003
         try:

@@ -11,6 +11,7 @@ import click
 from uvms_mj.cli.common import (EXIT_JOINT_LIMIT, EXIT_INTERRUPTED, EXIT_RENDER, SCENARIO, _JSON_HELP, _check_dir,
                                 _check_out, _io_error, _json_dest, _json_metrics, _load, _progress, _read, _warn,
                                 _write_json, exit_code, metrics_table, packaged_scenarios, scenarios_dir)
+from uvms_mj.io.interrupts import partial_output
 from uvms_mj.plant.params import ParameterError
 
 
@@ -116,7 +117,7 @@ def _render(log, video_path: Path, log_path, **kw) -> dict:
     from uvms_mj.analysis.render import RenderError, render_video
 
     try:
-        with _progress(f"render {video_path.name}", "frame") as tick:
+        with _progress(f"render {video_path.name}", "frame") as tick, partial_output(video_path):
             return render_video(log, video_path, on_frame=tick, **kw)
     except RenderError as exc:
         click.echo(f"error: {exc}", err=True)

@@ -45,6 +45,8 @@ from typing import Any
 
 import numpy as np
 
+from uvms_mj.io.interrupts import partial_output
+
 __all__ = ["COLUMNS", "FORMATS", "LAYOUTS", "ExportError", "export_log", "tables", "to_dataframe"]
 
 FORMATS = ("csv", "parquet", "npz", "mat")
@@ -209,7 +211,7 @@ def export_log(log, fmt: str, out: str | Path | None = None, layout: str = "wide
                 for table, names in groups.items():
                     arrays[f"{table}/t"] = t
                     arrays.update({f"{table}/{n}": np.asarray(log.signals[n]) for n in names})
-            with open(path, "wb") as f:
+            with partial_output(path), open(path, "wb") as f:
                 np.savez_compressed(f, **arrays)
         else:
             sio = _require("scipy.io", fmt)
@@ -220,7 +222,8 @@ def export_log(log, fmt: str, out: str | Path | None = None, layout: str = "wide
             else:
                 for table, names in groups.items():
                     mdict[table] = {"t": t, **{_mat_name(n): np.asarray(log.signals[n]) for n in names}}
-            sio.savemat(str(path), mdict, do_compression=True, oned_as="column")
+            with partial_output(path):
+                sio.savemat(str(path), mdict, do_compression=True, oned_as="column")
         return [path]
     tabs = tables(log, layout, columns)
     if layout == "wide":
@@ -232,8 +235,9 @@ def export_log(log, fmt: str, out: str | Path | None = None, layout: str = "wide
         folder.mkdir(parents=True, exist_ok=True)
         targets = {folder / f"{name}.{fmt}": cols for name, cols in tabs.items()}
     for path, cols in targets.items():
-        if fmt == "csv":
-            _write_csv(cols, path)
-        else:
-            _write_parquet(cols, path, meta, names)
+        with partial_output(path):  # an interrupted or failed write leaves no half a file
+            if fmt == "csv":
+                _write_csv(cols, path)
+            else:
+                _write_parquet(cols, path, meta, names)
     return list(targets)

@@ -13,6 +13,7 @@ from matplotlib.figure import Figure
 
 from uvms_mj.analysis.plots.common import (_DPI, _XY, _dig, _finish, _g, _headroom, _label, _meta, _missing,
                                            _new_figure, _rms, _shade, _shade_phases, _sig)
+from uvms_mj.io.interrupts import partial_output
 
 _THR = ("#1f77b4", "#ff7f0e", "#2ca02c")
 
@@ -306,7 +307,8 @@ def _plot_paper_run(log, out: Path, stem: str) -> list[Path]:
                                 ("actuation", _actuation_figure, "actuation and singularity handling")):
         fig = build(log, f"{name}: {what}")
         path = out / f"{stem}_{suffix}.png"
-        fig.savefig(path, dpi=_DPI)
+        with partial_output(path):  # an interrupted write leaves no half a PNG
+            fig.savefig(path, dpi=_DPI)
         paths.append(path)
     return paths
 
@@ -357,5 +359,6 @@ def _plot_paper_comparison(logs: Mapping[str, Any], out_path: Path) -> Path:
         if t_hi > t_lo:
             a.set_xlim(t_lo, t_hi)
     ax[2].set_xlabel("time t [s]")
-    fig.savefig(out_path, dpi=_DPI)
+    with partial_output(out_path):
+        fig.savefig(out_path, dpi=_DPI)
     return out_path

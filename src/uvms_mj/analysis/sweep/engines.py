@@ -1,6 +1,13 @@
 """Where a sweep's runs execute: ``process`` (a spawn-started process pool; a worker dies with
 its sweep), ``ray`` (Ray tasks) or ``serial`` (this process). Each calls ``done(task, result)``
-as runs finish; a run never raises (its failure is its result)."""
+as runs finish; a run never raises (its failure is its result).
+
+Interrupted (KeyboardInterrupt: SIGINT, or SIGTERM inside :func:`uvms_mj.io.interrupts.handle_sigterm`),
+an engine starts no further run, records the runs whose results are already back, ends its
+workers (process: SIGTERM, which closes a worker's log with status "interrupted" and ends it;
+SIGKILL for one still alive :data:`WORKER_GRACE_S` later; ray: the tasks cancelled with force)
+and re-raises. A process worker ignores SIGINT (a terminal's Ctrl-C reaches the whole process
+group: the sweep's process ends its workers)."""
 
 from __future__ import annotations
 
@@ -35,8 +42,17 @@ def _one_line(text: str, limit: int = 400) -> str:
     return s if len(s) <= limit else s[:limit - 3] + "..."
 
 
+#: Seconds an interrupted process engine waits for its workers to end after SIGTERM (they close
+#: their log and exit in milliseconds) before it kills them. Ours: within the command line's 1.5 s
+#: grace (uvms_mj.io.interrupts.GRACE_S), leaving time for the table.
+WORKER_GRACE_S = 0.5
+
 #: The sweep's process, in a worker of the process engine (None elsewhere).
 _PARENT_PID: int | None = None
+#: The sweep's stop flag (a multiprocessing Event set when it is interrupted), in a worker.
+_STOP = None
+#: True while a worker executes a run (SIGTERM then closes the run's log before the worker ends).
+_IN_RUN = False
 
 
 def _parent_gone() -> bool:
@@ -50,16 +66,29 @@ def _watch_parent() -> None:
             os._exit(1)
 
 
-def _worker_init(parent: int) -> None:
+def _worker_sigterm(signum, frame) -> None:  # noqa: ARG001
+    """A worker's SIGTERM: inside a run, the interrupt of handle_sigterm (the run's log closes with
+    status "interrupted", then :func:`execute_run` ends the worker); between runs, exit at once."""
+    if not _IN_RUN:
+        os._exit(130)
+    from uvms_mj.io.interrupts import _on_signal
+
+    _on_signal(signum, frame)
+
+
+def _worker_init(parent: int, stop=None) -> None:
     """Initializer of the process engine's workers: a worker ends with its sweep, even after
     ``kill -9`` of the sweep (Linux: PR_SET_PDEATHSIG; everywhere: a thread polling
-    os.getppid() every 0.5 s, and a check before each run)."""
-    global _PARENT_PID
+    os.getppid() every 0.5 s, and a check before each run); it ignores SIGINT and ends on
+    SIGTERM (:func:`_worker_sigterm`); with ``stop`` set it starts no run."""
+    global _PARENT_PID, _STOP
     import signal
     import sys
     import threading
 
-    _PARENT_PID = parent
+    _PARENT_PID, _STOP = parent, stop
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, _worker_sigterm)
     if sys.platform.startswith("linux"):
         try:
             import ctypes
@@ -74,9 +103,23 @@ def _worker_init(parent: int) -> None:
 
 def execute_run(task: dict) -> dict:
     """Run one task (in a worker): never raises for a failing run; returns status, reason,
-    metrics, t_end, wall_s."""
-    if _parent_gone():
+    metrics, t_end, wall_s. In a process worker, an interrupt (SIGTERM) ends the worker once the
+    run's log is closed."""
+    global _IN_RUN
+    if _parent_gone() or (_STOP is not None and _STOP.is_set()):
         os._exit(1)
+    if _PARENT_PID is None:
+        return _execute_run(task)
+    _IN_RUN = True
+    try:
+        return _execute_run(task)
+    except KeyboardInterrupt:
+        os._exit(130)
+    finally:
+        _IN_RUN = False
+
+
+def _execute_run(task: dict) -> dict:
     t0 = time.perf_counter()
     out: dict[str, Any] = {"status": "error", "reason": "", "metrics": {}, "t_end": float("nan")}
     try:
@@ -90,6 +133,8 @@ def execute_run(task: dict) -> dict:
             from uvms_mj.scenario.schema import build, resolved
 
             plant, _ = build(sc)
+            if _STOP is not None and _STOP.is_set():  # the sweep was interrupted while this run was set up
+                os._exit(1)
             Path(log).parent.mkdir(parents=True, exist_ok=True)
             meta = {"scenario": resolved(sc), "seed": sc.seed, "sweep": {"run_id": task["run_id"],
                                                                          "sample": task["sample"]}}
@@ -133,34 +178,80 @@ def _engine_process(tasks: list[dict], workers: int, done: Callable[[dict, dict]
     from concurrent.futures import ProcessPoolExecutor, as_completed
     from concurrent.futures.process import BrokenProcessPool
 
+    from uvms_mj.io.interrupts import _on_interrupt
+
     ctx = mp.get_context("spawn")
+    stop = ctx.Event()
     queue = list(tasks)
     attempts: dict[str, int] = {}
-    while queue:
-        pool = ProcessPoolExecutor(max_workers=max(1, min(workers, len(queue))), mp_context=ctx,
-                                   initializer=_worker_init, initargs=(os.getpid(),))
+    _on_interrupt.append(stop.set)  # set in the signal handler itself: no worker starts a run after it
+    try:
+        while queue:
+            pool = ProcessPoolExecutor(max_workers=max(1, min(workers, len(queue))), mp_context=ctx,
+                                       initializer=_worker_init, initargs=(os.getpid(), stop))
+            futs: dict = {}
+            recorded: set = set()
+            try:
+                futs = {pool.submit(execute_run, t): t for t in queue}
+                queue = []
+                for fut in as_completed(futs):
+                    t = futs[fut]
+                    recorded.add(fut)
+                    try:
+                        res = fut.result()
+                    except BrokenProcessPool as exc:
+                        attempts[t["run_id"]] = attempts.get(t["run_id"], 0) + 1
+                        if attempts[t["run_id"]] >= MAX_ATTEMPTS:
+                            done(t, _crashed(exc))
+                        else:
+                            queue.append(t)
+                        continue
+                    except Exception as exc:  # noqa: BLE001 - e.g. a result that does not unpickle
+                        res = _failed(exc)
+                    done(t, res)
+            except BaseException:
+                stop.set()
+                _end_pool(pool)
+                _record_finished(futs, recorded, done)
+                raise
+            pool.shutdown(wait=True)
+    finally:
+        _on_interrupt.remove(stop.set)
+
+
+def _failed(exc: BaseException) -> dict:
+    return {"status": "error", "reason": _one_line(f"{type(exc).__name__}: {exc}"), "metrics": {},
+            "t_end": float("nan"), "wall_s": float("nan")}
+
+
+def _end_pool(pool) -> None:
+    """An interrupted pool: queued runs cancelled, its workers sent SIGTERM (they close the log of
+    the run they are in and exit), killed if still alive WORKER_GRACE_S later."""
+    procs = list((getattr(pool, "_processes", None) or {}).values())
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in procs:
         try:
-            futs = {pool.submit(execute_run, t): t for t in queue}
-            queue = []
-            for fut in as_completed(futs):
-                t = futs[fut]
-                try:
-                    res = fut.result()
-                except BrokenProcessPool as exc:
-                    attempts[t["run_id"]] = attempts.get(t["run_id"], 0) + 1
-                    if attempts[t["run_id"]] >= MAX_ATTEMPTS:
-                        done(t, _crashed(exc))
-                    else:
-                        queue.append(t)
-                    continue
-                except Exception as exc:  # noqa: BLE001 - e.g. a result that does not unpickle
-                    res = {"status": "error", "reason": _one_line(f"{type(exc).__name__}: {exc}"), "metrics": {},
-                           "t_end": float("nan"), "wall_s": float("nan")}
-                done(t, res)
-        except BaseException:
-            pool.shutdown(wait=True, cancel_futures=True)
-            raise
-        pool.shutdown(wait=True)
+            p.terminate()
+        except (OSError, ValueError):
+            pass
+    deadline = time.monotonic() + WORKER_GRACE_S
+    for p in procs:
+        p.join(max(0.0, deadline - time.monotonic()))
+    for p in procs:
+        if p.is_alive():
+            try:
+                p.kill()
+                p.join(0.1)
+            except (OSError, ValueError):
+                pass
+
+
+def _record_finished(futs: dict, recorded: set, done: Callable[[dict, dict], None]) -> None:
+    """The runs whose results came back but were not recorded yet (the interrupt came first)."""
+    for fut, t in futs.items():
+        if fut in recorded or not fut.done() or fut.cancelled() or fut.exception() is not None:
+            continue
+        done(t, fut.result())
 
 
 def _engine_ray(tasks: list[dict], workers: int, done: Callable[[dict, dict], None]) -> None:
@@ -169,18 +260,22 @@ def _engine_ray(tasks: list[dict], workers: int, done: Callable[[dict, dict], No
     except ImportError:
         raise SweepError(RAY_MISSING) from None
     started = False
+    handlers = _signal_handlers()
     if not ray.is_initialized():
         if os.environ.get("RAY_ADDRESS"):
             ray.init(log_to_driver=False)
         else:
             ray.init(num_cpus=workers, include_dashboard=False, log_to_driver=False)
         started = True
+    _reclaim_signals(handlers)
+    interrupted = False
     try:
         remote = ray.remote(num_cpus=1, max_retries=MAX_ATTEMPTS - 1)(execute_run)
         pending = {remote.remote(t): t for t in tasks}
         try:
             while pending:
-                ready, _ = ray.wait(list(pending), num_returns=1)
+                # a short timeout: the main thread returns to Python (and a signal's handler) at least every 0.2 s
+                ready, _ = ray.wait(list(pending), num_returns=1, timeout=0.2)
                 for ref in ready:
                     t = pending.pop(ref)
                     try:
@@ -189,12 +284,45 @@ def _engine_ray(tasks: list[dict], workers: int, done: Callable[[dict, dict], No
                         res = _crashed(exc)
                     done(t, res)
         except BaseException:
+            interrupted = True
+            ready, _ = ray.wait(list(pending), num_returns=len(pending), timeout=0) if pending else ([], [])
+            for ref in ready:  # finished before the interrupt was seen: recorded, not lost
+                t = pending.pop(ref)
+                try:
+                    done(t, ray.get(ref, timeout=0.1))
+                except Exception:  # noqa: BLE001 - a failed task: re-run on resume
+                    pass
             for ref in pending:
-                ray.cancel(ref, force=True)
+                try:
+                    ray.cancel(ref, force=True)
+                except Exception:  # noqa: BLE001 - a task that ended meanwhile
+                    pass
             raise
     finally:
-        if started:
+        if started and not interrupted:
+            # Interrupted, the sweep writes its table first: Ray's own exit handler (or the command
+            # line's watchdog, which kills the child processes) ends the local cluster after.
             ray.shutdown()
+
+
+def _signal_handlers() -> dict:
+    import signal
+
+    return {sig: signal.getsignal(sig) for sig in (signal.SIGINT, signal.SIGTERM)}
+
+
+def _reclaim_signals(handlers: dict) -> None:
+    """Put back this process's handlers of SIGINT and SIGTERM (``handlers``, from before
+    ray.init): Ray installs its own in the driver (SIGTERM: exit 1, or abort with rc -6 from its
+    C++ handler), which would bypass the sweep's interrupt (rows written, exit 130)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for sig, handler in handlers.items():
+        if handler is not None:
+            signal.signal(sig, handler)
 
 
 _ENGINES = {"process": _engine_process, "ray": _engine_ray, "serial": _engine_serial}

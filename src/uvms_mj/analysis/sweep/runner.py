@@ -18,6 +18,7 @@ from uvms_mj.analysis.sweep.plan import SweepPlan, _jsonable
 from uvms_mj.analysis.sweep.spec import SweepError
 from uvms_mj.analysis.sweep.summary import summarize
 from uvms_mj.analysis.sweep.table import _row, _write_table
+from uvms_mj.io.interrupts import partial_output
 
 #: The statuses of a finished run (not retried on resume; ``crashed`` is).
 FINISHED = ("ok", "diverged", "error", "joint_limit")
@@ -102,10 +103,11 @@ def prepare_out(plan: SweepPlan, out_dir: str | Path, fresh: bool = False) -> di
     if not spec.exists():
         from uvms_mj import __version__
 
-        spec.write_text(json.dumps({"definition": plan.definition, "source": plan.scenario_path,
-                                    "sets": list(plan.sets), "uvms_mj": __version__,
-                                    "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}, indent=1),
-                        encoding="utf-8")
+        with partial_output(spec):
+            spec.write_text(json.dumps({"definition": plan.definition, "source": plan.scenario_path,
+                                        "sets": list(plan.sets), "uvms_mj": __version__,
+                                        "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())},
+                                       indent=1), encoding="utf-8")
     wanted = {r.key for r in plan.runs}
     finished = {}
     for row in _read_jsonl(out / "runs.jsonl"):
@@ -174,11 +176,13 @@ def run_sweep(
         elapsed = time.perf_counter() - t0
         order = {r.key: i for i, r in enumerate(plan.runs)}
         rows = sorted((r for key, r in rows_by_key.items() if key in order), key=lambda r: order[r["key"]])
-        tables = _write_table(plan, rows, out)
+        tables = _write_table(plan, rows, out, parquet=not interrupted)
         summary = summarize(rows, plan.controllers, [a.column for a in plan.axes])
         summary.update(planned=len(plan.runs), skipped=len(finished), ran=k, elapsed_s=elapsed,
                        runs_per_s=(k / elapsed if k and elapsed > 0 else None), workers=workers, engine=engine)
-        (out / "summary.json").write_text(json.dumps(_jsonable(summary), indent=1, allow_nan=True), encoding="utf-8")
+        with partial_output(out / "summary.json"):
+            (out / "summary.json").write_text(json.dumps(_jsonable(summary), indent=1, allow_nan=True),
+                                              encoding="utf-8")
         figs = []
         if figures and not interrupted and rows:
             discrete = [a.column for a in plan.axes if a.kind == "grid" or a.spec.dist == "choice"]

@@ -13,6 +13,7 @@ from typing import Any
 
 from uvms_mj.analysis.sweep.plan import Run, SweepPlan, _jsonable
 from uvms_mj.analysis.sweep.spec import _is_num
+from uvms_mj.io.interrupts import partial_output
 
 #: The metrics of :func:`uvms_mj.sim.experiment.metrics`, in table order (others found are appended).
 METRICS = ("base_pos_rms_mm", "base_pos_max_mm", "base_att_rms_mrad", "base_att_max_mrad", "tip_rms_mm",
@@ -50,17 +51,24 @@ def _cell(v: Any) -> Any:
     return v
 
 
-def _write_table(plan: SweepPlan, rows: list[dict], out: Path) -> list[Path]:
+def _write_table(plan: SweepPlan, rows: list[dict], out: Path, parquet: bool = True) -> list[Path]:
+    """results.csv (through a temporary file) and, with ``parquet`` and pyarrow, results.parquet.
+    An interrupted sweep passes ``parquet=False``: pyarrow's first write takes 0.5-1.5 s on a busy
+    machine, past the command line's grace (uvms_mj.io.interrupts.GRACE_S); its stale
+    results.parquet is removed (results.csv has every finished run; the resumed sweep writes both)."""
     cols = _columns(plan, rows)
     paths = []
     tmp = out / "results.csv.tmp"
-    with open(tmp, "w", newline="", encoding="utf-8") as f:
+    with partial_output(tmp), open(tmp, "w", newline="", encoding="utf-8") as f:
         w = csv.writer(f)
         w.writerow(cols)
         for r in rows:
             w.writerow([_cell(r.get(c, "")) for c in cols])
     os.replace(tmp, out / "results.csv")
     paths.append(out / "results.csv")
+    if not parquet:
+        (out / "results.parquet").unlink(missing_ok=True)
+        return paths
     try:
         import pyarrow as pa
         import pyarrow.parquet as pq
@@ -71,7 +79,8 @@ def _write_table(plan: SweepPlan, rows: list[dict], out: Path) -> list[Path]:
     for c in [a.column for a in plan.axes]:
         if any(not _is_num(v) for v in data[c]):
             data[c] = [json.dumps(_jsonable(v)) for v in data[c]]
-    pq.write_table(pa.table(data), out / "results.parquet")
+    with partial_output(out / "results.parquet"):
+        pq.write_table(pa.table(data), out / "results.parquet")
     paths.append(out / "results.parquet")
     return paths
 
