@@ -247,11 +247,42 @@ def _end_pool(pool) -> None:
 
 
 def _record_finished(futs: dict, recorded: set, done: Callable[[dict, dict], None]) -> None:
-    """The runs whose results came back but were not recorded yet (the interrupt came first)."""
+    """The runs whose results came back but were not recorded yet (the interrupt came first); and
+    those whose worker finished the run (its log closed with a final status) but whose result was
+    still in the pipe when the pool was ended: their row from the log (:func:`_result_from_log`)."""
     for fut, t in futs.items():
-        if fut in recorded or not fut.done() or fut.cancelled() or fut.exception() is not None:
+        if fut in recorded or fut.cancelled():
             continue
-        done(t, fut.result())
+        if fut.done() and fut.exception() is None:
+            done(t, fut.result())
+            continue
+        res = _result_from_log(t)
+        if res is not None:
+            done(t, res)
+
+
+#: A log closed with one of these statuses is a finished run (not "interrupted").
+_FINISHED = ("ok", "diverged", "error", "joint_limit")
+
+
+def _result_from_log(task: dict) -> dict | None:
+    """A task's result read back from its complete log (status, reason, metrics, t_end; wall_s
+    unknown: NaN), or None (no log, a log cut short or interrupted, unreadable)."""
+    log = task.get("log")
+    if not log or not Path(log).is_file():
+        return None
+    try:
+        from uvms_mj.io.recorder import read_log
+        from uvms_mj.sim.experiment import metrics
+
+        data = read_log(log)
+        if data.truncated or data.status not in _FINISHED:
+            return None
+        return {"status": str(data.status), "reason": _one_line(data.reason or ""),
+                "metrics": {k: float(v) for k, v in metrics(data).items()},
+                "t_end": float(data.t[-1]) if len(data.t) else 0.0, "wall_s": float("nan")}
+    except Exception:  # noqa: BLE001 - a log that cannot be read gives no row
+        return None
 
 
 def _engine_ray(tasks: list[dict], workers: int, done: Callable[[dict, dict], None]) -> None:
