@@ -46,3 +46,26 @@ def test_validate_and_short_run_import_no_plotting_or_learning(tmp_path) -> None
     code, _, after = _probe(["run", PAPER, "--set", "duration=0.2", "--no-plots", "--no-video",
                              "-o", str(tmp_path / "r.mcap")])
     assert code == 0 and not_wanted.isdisjoint(after), after
+
+
+def test_manipulability_disk_cache_gives_the_searchs_numbers(tmp_path, monkeypatch) -> None:
+    """The disk cache that spares ``validate`` scipy's import: a hit returns the search's very numbers
+    (floats written as round-trip reprs), without searching."""
+    import numpy as np
+
+    from uvms_mj.control import manipulability as mm
+    from uvms_mj.plant.plant import Plant
+
+    monkeypatch.setenv("UVMS_MJ_CACHE", str(tmp_path))
+    monkeypatch.setenv(mm.ENV_DISK_CACHE, "on")
+    monkeypatch.setattr(mm, "_CACHE", {})
+    m = Plant().model
+    tip = m.site("tip").id
+    dofs = [int(m.jnt_dofadr[m.joint(n).id]) for n in ("joint1", "joint2")]
+    first = mm.max_manipulability(m, tip, dofs, [0, 1])
+    assert len(list((tmp_path / "manipulability").glob("*.json"))) == 1
+    np.testing.assert_allclose(first.value, 0.25 * 0.25, rtol=1e-12)  # l1 l2 (module docstring), Table 1
+    monkeypatch.setattr(mm, "_CACHE", {})
+    monkeypatch.setattr(mm, "_search", lambda *a: (_ for _ in ()).throw(AssertionError("searched")))
+    again = mm.max_manipulability(m, tip, dofs, [0, 1])
+    assert again.value == first.value and np.array_equal(again.q_arm, first.q_arm)
