@@ -54,7 +54,8 @@ def _time(args: list[str], repeats: int) -> tuple[float, float]:
 def _heavy_imports(args: list[str]) -> list[str]:
     err = subprocess.run([sys.executable, "-X", "importtime", *args[1:]], env=_env(), check=True,
                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True).stderr
-    mods = {line.rsplit("|", 1)[-1].strip().split(".")[0] for line in err.splitlines() if line.startswith("import time:")}
+    mods = {line.rsplit("|", 1)[-1].strip().split(".")[0] for line in err.splitlines()
+            if line.startswith("import time:")}
     return sorted(m for m in HEAVY if m in mods)
 
 
