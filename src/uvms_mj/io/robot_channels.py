@@ -100,7 +100,6 @@ class _RobotChannels:
         self.model = model
         self.layout = Layout.of(model, tip_site)
         self.data = mujoco.MjData(model)
-        self._pose_buf = np.empty((model.nbody - 1, 7))
         self.bodies = list(range(1, model.nbody))
         self.body_names = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) or f"body{b}" for b in self.bodies]
         self.body_name = {b: n for b, n in zip(self.bodies, self.body_names)}
@@ -186,35 +185,62 @@ class _RobotChannels:
 
     # ---------------------------------------------------------------- per sample
 
-    def _parent_relative(self, d, pose: np.ndarray) -> None:
-        """Fill ``pose`` (nbody - 1, 7: x y z, qx qy qz qw) with every body's frame in its parent
-        body's frame from the world poses of ``mj_kinematics``: p = R_parent^T (x_child - x_parent),
-        q = q_parent^-1 q_child (Hamilton product, w first in MuJoCo); a child of the world
-        keeps its world pose."""
-        par = self._parent
-        xmat = d.xmat.reshape(-1, 3, 3)
-        pose[:, :3] = np.einsum("nji,nj->ni", xmat[par], d.xpos[1:] - d.xpos[par])
-        qp, qc = d.xquat[par], d.xquat[1:]
-        w1, x1, y1, z1 = qp[:, 0], -qp[:, 1], -qp[:, 2], -qp[:, 3]  # the conjugate: the inverse of a unit q
-        w2, x2, y2, z2 = qc[:, 0], qc[:, 1], qc[:, 2], qc[:, 3]
-        pose[:, 3] = w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2
-        pose[:, 4] = w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2
-        pose[:, 5] = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2
-        pose[:, 6] = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2
-
-    def write(self, out: list, stamp: str, head: str, row: Mapping[str, Any]) -> None:
-        """Append this sample's /tf, /joint_states and /thrusters messages (channel, data) to ``out``."""
+    def _tf_poses(self, rows: list) -> list:
+        """Per row its bodies' frames in their parent body's frames, (nbody - 1, 7: x y z, qx qy qz
+        qw), or None (no /tf: no finite ``q_true``): ``mj_kinematics`` row by row, then for the whole
+        batch at once p = R_parent^T (x_child - x_parent), q = q_parent^-1 q_child (Hamilton product of
+        MuJoCo's w-first quaternions); a child of the world keeps its world pose."""
         import mujoco
 
+        out: list = [None] * len(rows)
+        if not self.has_tf:
+            return out
+        m, d, keep, xs, qs, rs = self.model, self.data, [], [], [], []
+        for i, row in enumerate(rows):
+            q = row.get("q_true")
+            if q is None:
+                continue
+            q = np.asarray(q, dtype=float)
+            if not math.isfinite(float(q.sum())):
+                continue
+            d.qpos[:] = q
+            mujoco.mj_kinematics(m, d)
+            keep.append(i)
+            xs.append(d.xpos.copy())
+            qs.append(d.xquat.copy())
+            rs.append(d.xmat.copy())
+        if not keep:
+            return out
+        par = self._parent
+        X, Q, R = np.array(xs), np.array(qs), np.array(rs).reshape(len(keep), -1, 3, 3)
+        pose = np.empty((len(keep), len(par), 7))
+        dx = (X[:, 1:] - X[:, par])[..., None]
+        pose[..., :3] = (np.swapaxes(R[:, par], -1, -2) @ dx)[..., 0]
+        qp, qc = Q[:, par], Q[:, 1:]
+        w1, x1, y1, z1 = qp[..., 0], -qp[..., 1], -qp[..., 2], -qp[..., 3]  # the conjugate: a unit q's inverse
+        w2, x2, y2, z2 = qc[..., 0], qc[..., 1], qc[..., 2], qc[..., 3]
+        pose[..., 3] = w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2
+        pose[..., 4] = w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2
+        pose[..., 5] = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2
+        pose[..., 6] = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2
+        for j, i in enumerate(keep):
+            out[i] = pose[j]
+        return out
+
+    def write_batch(self, outs: list, stamps: list, heads: list, rows: list) -> None:
+        """:meth:`write` for a batch of rows (their /tf numbers computed at once)."""
+        for out, stamp, head, row, pose in zip(outs, stamps, heads, rows, self._tf_poses(rows)):
+            self.write(out, stamp, head, row, pose)
+
+    def write(self, out: list, stamp: str, head: str, row: Mapping[str, Any], pose=False) -> None:
+        """Append this sample's /tf, /joint_states and /thrusters messages (channel, data) to ``out``;
+        ``pose``: its /tf numbers if already computed (:meth:`write_batch`)."""
         lay = self.layout
         if self.has_tf and "q_true" in row:
             q = np.asarray(row["q_true"], dtype=float)
             if math.isfinite(float(q.sum())):
-                d = self.data
-                d.qpos[:] = q
-                mujoco.mj_kinematics(self.model, d)
-                self._parent_relative(d, self._pose_buf)
-                pose = self._pose_buf
+                if pose is False:
+                    pose = self._tf_poses([row])[0]
                 nums = _enc(pose.ravel().tolist())[1:-1].split(",")
                 msg = self._tf_tmpl.replace("\0", stamp) % tuple(nums)
                 out.append((self.tf_id, msg.encode()))
