@@ -7,6 +7,8 @@ next to each assertion.
 
 from __future__ import annotations
 
+import os
+
 import mujoco
 import numpy as np
 import pytest
@@ -14,6 +16,9 @@ import pytest
 from oracles.planar.rac import register_oracles
 from uvms_mj import Plant
 from uvms_mj.physics import build as _build
+
+# The arm's largest manipulability searched in every test (no disk cache shared with the user's runs).
+os.environ["UVMS_MJ_MANIPULABILITY_CACHE"] = "off"
 
 register_oracles()  # the planar closed-form RAC as controllers rac_planar, rac_dob_planar (tests only)
 

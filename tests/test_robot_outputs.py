@@ -153,6 +153,9 @@ def test_channels_and_schemas(recorded) -> None:
 
 
 def test_tf_equals_mujoco_kinematics(recorded) -> None:
+    """/tf is the model's tree (view -> world, then each body in its parent body's frame): the parent's
+    world pose from MuJoCo times the logged transform is the body's world pose, to 1e-12 (float64
+    rounding of one rigid transform of positions below ~10 m)."""
     path, plant, run = recorded
     m = plant.model
     names = [m.body(b).name for b in range(1, m.nbody)]
@@ -161,16 +164,22 @@ def test_tf_equals_mujoco_kinematics(recorded) -> None:
     for k in (0, 37, len(run.t) - 1):
         d.qpos[:] = run.signals["q_true"][k]
         mujoco.mj_kinematics(m, d)
-        tr = tfs[k]["transforms"]
+        view, *tr = tfs[k]["transforms"]
+        assert (view["parent_frame_id"], view["child_frame_id"]) == ("view", "world")
+        assert view["rotation"] == {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}  # this world is z up already
         assert [x["child_frame_id"] for x in tr] == names
-        assert {x["parent_frame_id"] for x in tr} == {"world"}
+        assert [x["parent_frame_id"] for x in tr] == \
+            ["world" if m.body_parentid[b] == 0 else m.body(int(m.body_parentid[b])).name for b in range(1, m.nbody)]
         sec, nsec = divmod(int(round(run.t[k] * 1e9)), 1_000_000_000)
-        assert tr[0]["timestamp"] == {"sec": sec, "nsec": nsec}
+        assert tr[0]["timestamp"] == view["timestamp"] == {"sec": sec, "nsec": nsec}
         for b, x in enumerate(tr, start=1):
-            pos = [x["translation"][c] for c in "xyz"]
-            quat = [x["rotation"][c] for c in "wxyz"]
+            p = int(m.body_parentid[b])
+            rp = d.xmat[p].reshape(3, 3)
+            pos = d.xpos[p] + rp @ [x["translation"][c] for c in "xyz"]
+            rel = np.empty(9)
+            mujoco.mju_quat2Mat(rel, np.array([x["rotation"][c] for c in "wxyz"]))
             np.testing.assert_allclose(pos, d.xpos[b], rtol=0, atol=1e-12)
-            np.testing.assert_allclose(quat, d.xquat[b], rtol=0, atol=1e-12)
+            np.testing.assert_allclose(rp @ rel.reshape(3, 3), d.xmat[b].reshape(3, 3), rtol=0, atol=1e-12)
 
 
 def test_scene_has_the_models_geoms(recorded) -> None:

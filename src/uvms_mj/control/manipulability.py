@@ -43,13 +43,17 @@ cheap (one ``mj_kinematics`` + ``mj_jacSite``) and multi-modal (symmetric maxima
 +-pi/2; several on 3-D arms), so a global coarse look then a local polish; gradient-free because
 w's gradient needs second-order kinematics, and a maximum is flat (w error ~ (joint error)^2), so
 Nelder-Mead's 1e-8 rad tolerance gives w to round-off. Deterministic (a fixed grid and starts).
-About 0.1 s, once per nominal model: cached on the model's kinematic arrays.
+About 0.1 s, once per nominal model: cached on the model's kinematic arrays, in memory and on disk
+(:func:`_disk_cached`: scipy alone takes ~0.5 s to import, most of a ``uvms-mj validate``).
 """
 
 from __future__ import annotations
 
+import hashlib
 import itertools
+import json
 import math
+import os
 from typing import Any, Sequence
 
 import mujoco
@@ -217,10 +221,52 @@ def max_manipulability(model: mujoco.MjModel, tip_site: int, arm_dofs: Sequence[
     if len(rows) > len(arm_dofs) or not arm_dofs:  # rank B < rows: w is identically 0
         res = MaxManipulability(0.0, None, ranges)
     else:
-        res = _search(model, tip_site, arm_dofs, rows, ranges, periodic)
+        res = _disk_cached(key, lambda: _search(model, tip_site, arm_dofs, rows, ranges, periodic), ranges)
     if len(_CACHE) >= _CACHE_SIZE:
         _CACHE.pop(next(iter(_CACHE)))
     _CACHE[key] = res
+    return res
+
+
+#: Set to "off" to search every time (no disk cache); the suite sets it (tests/conftest.py).
+ENV_DISK_CACHE = "UVMS_MJ_MANIPULABILITY_CACHE"
+
+
+def _disk_cached(key: bytes, search, ranges) -> MaxManipulability:
+    """``search()``'s result, kept as JSON in ``<cache_dir>/manipulability/<sha256>.json``
+    (:func:`uvms_mj.physics.build.cache_dir`). The name hashes the kinematics ``key``, this module's
+    source and the mujoco and scipy versions (all the result depends on); floats are written as
+    their shortest round-trip repr, so a hit gives back the very numbers of a search. An unreadable
+    or unwritable cache is a miss (the search runs); ``$UVMS_MJ_MANIPULABILITY_CACHE=off`` turns it off."""
+    if os.environ.get(ENV_DISK_CACHE, "").lower() in ("off", "0", "false", "no"):
+        return search()
+    from importlib.metadata import PackageNotFoundError, version
+
+    from uvms_mj.physics.build import cache_dir
+
+    try:
+        scipy_version = version("scipy")
+    except PackageNotFoundError:
+        scipy_version = "none"
+    h = hashlib.sha256(key)
+    for part in (open(__file__, "rb").read(), mujoco.__version__.encode(), scipy_version.encode()):
+        h.update(b"|" + part)
+    path = cache_dir() / "manipulability" / f"{h.hexdigest()}.json"
+    try:
+        d = json.loads(path.read_text())
+        return MaxManipulability(d["value"], None if d["q_arm"] is None else np.array(d["q_arm"], dtype=float),
+                                 ranges)
+    except (OSError, ValueError, KeyError, TypeError):
+        pass
+    res = search()
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
+        q = None if res.q_arm is None else [float(v) for v in res.q_arm]
+        tmp.write_text(json.dumps({"value": res.value, "q_arm": q}))
+        os.replace(tmp, path)  # atomic: a reader sees the whole file or none
+    except OSError:
+        pass
     return res
 
 

@@ -41,7 +41,6 @@ from __future__ import annotations
 import math
 
 import numpy as np
-from scipy.linalg import expm
 
 __all__ = ["DelayPredictor", "GAIN_MARGIN", "GAIN_STEP", "auto_gains", "check_margin_settings", "closed_loop_matrix",
            "largest_stable_gain", "spectral_radius", "thruster_lag"]
@@ -73,6 +72,8 @@ def _plant(T: float, tau: float, plant: str) -> tuple[np.ndarray, np.ndarray]:
     n = Ac.shape[0]
     E = np.zeros((n + 1, n + 1))
     E[:n, :n], E[:n, n] = Ac, Bc
+    from scipy.linalg import expm  # here: scipy costs ~0.5 s to import (a quick CLI, issue 22 item 7)
+
     F = expm(E * T)
     return F[:n, :n], F[:n, n]
 

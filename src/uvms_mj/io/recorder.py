@@ -51,17 +51,20 @@ topic                  schema                   content and rate
 =====================  =======================  ==============================================
 
 Robot logs (any floating robot: ``McapRecorder(path, None, metadata, model=plant.model)``
-with a free vehicle's :class:`~uvms_mj.plant.plant.Plant` model; World z up, so no ``view`` frame) have the
+with a free vehicle's :class:`~uvms_mj.plant.plant.Plant` model; World z up, so ``view`` is ``world``) have the
 same ``/state/true`` and ``/control`` channels and, by the model's own names
 (:class:`~uvms_mj.plant.robot.Layout`):
 
 =====================  =======================  ==============================================
 topic                  schema                   content and rate
 =====================  =======================  ==============================================
-``/tf``                foxglove.FrameTransforms ``world -> <body>`` for every body (parent
-                                                ``world``, pose of the body frame in the world
-                                                from ``q_true`` through ``mj_kinematics``);
-                                                one message per sample.
+``/tf``                foxglove.FrameTransforms the model's kinematic tree: ``view -> world``
+                                                (fixed identity, so display frame ``view``
+                                                works for every log), then ``<parent> ->
+                                                <body>`` for every body (parent = the model's
+                                                parent body, ``world`` for the root; the body
+                                                frame in its parent's, from ``q_true`` through
+                                                ``mj_kinematics``); one message per sample.
 ``/scene``             foxglove.SceneUpdate     per body a frame-locked entity (id and frame =
                                                 the body's name) with its geoms of groups 0-2
                                                 (box -> cube, sphere/ellipsoid -> sphere,

@@ -84,8 +84,9 @@ def geom_primitive(model, g: int) -> tuple[str, dict] | None:
 
 
 class _RobotChannels:
-    """The Foxglove channels of any robot's log, by the model's own names: ``/tf`` (world ->
-    every body, from ``q_true`` through ``mj_kinematics``), ``/scene`` (geoms, thruster arrows,
+    """The Foxglove channels of any robot's log, by the model's own names: ``/tf`` (the
+    kinematic tree: ``view -> world`` fixed identity, then every body in its parent body's frame,
+    from ``q_true`` through ``mj_kinematics``), ``/scene`` (geoms, thruster arrows,
     tip), ``/joint_states`` (the arm joints), ``/thrusters`` (command and force per thruster)
     and the specs of the ``/scene/paths`` line strips."""
 
@@ -99,11 +100,11 @@ class _RobotChannels:
         self.model = model
         self.layout = Layout.of(model, tip_site)
         self.data = mujoco.MjData(model)
-        self._pose_buf = np.empty((model.nbody - 1, 7))
         self.bodies = list(range(1, model.nbody))
         self.body_names = [mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_BODY, b) or f"body{b}" for b in self.bodies]
         self.body_name = {b: n for b, n in zip(self.bodies, self.body_names)}
         self.body_name[0] = "world"
+        self._parent = np.asarray(model.body_parentid[1:], dtype=int)  # each body's parent body (0: the world)
         self.has_tf = self.has_joints = False
         self.thr_fields: tuple[str, ...] = ()
 
@@ -117,12 +118,16 @@ class _RobotChannels:
                           "no /tf or /joint_states", stacklevel=4)
         if self.has_tf:
             self.tf_id = channel(TOPIC_TF, "foxglove.FrameTransforms", SCHEMAS["foxglove.FrameTransforms"])
-            self._tf_heads = ['{"timestamp":%%s,"parent_frame_id":"world","child_frame_id":%s,'
-                              % json.dumps(n).replace("%", "%%") for n in self.body_names]
-            # One template for the whole message: "\0" stands for the stamp, %s for the numbers.
-            self._tf_tmpl = '{"transforms":[' + ",".join(
+            self._tf_heads = ['{"timestamp":%%s,"parent_frame_id":%s,"child_frame_id":%s,'
+                              % (json.dumps(self.body_name[int(m.body_parentid[b])]).replace("%", "%%"),
+                                 json.dumps(n).replace("%", "%%")) for b, n in zip(self.bodies, self.body_names)]
+            # One template for the whole message: "\0" stands for the stamp, %s for the numbers; first
+            # the fixed view -> world (identity: this world is already z up).
+            view = ('{"timestamp":\0,"parent_frame_id":"view","child_frame_id":"world","translation":'
+                    '{"x":0.0,"y":0.0,"z":0.0},"rotation":{"x":0.0,"y":0.0,"z":0.0,"w":1.0}}')
+            self._tf_tmpl = '{"transforms":[' + ",".join([view.replace("%", "%%")] + [
                 (h % "\0") + '"translation":{"x":%s,"y":%s,"z":%s},"rotation":{"x":%s,"y":%s,"z":%s,"w":%s}}'
-                for h in self._tf_heads) + "]}"
+                for h in self._tf_heads]) + "]}"
         self.has_joints = self.has_tf and len(lay.joint_names) > 0
         if self.has_joints:
             self.js_id = channel(TOPIC_JOINTS, "foxglove.JointStates", SCHEMAS["foxglove.JointStates"])
@@ -180,21 +185,62 @@ class _RobotChannels:
 
     # ---------------------------------------------------------------- per sample
 
-    def write(self, out: list, stamp: str, head: str, row: Mapping[str, Any]) -> None:
-        """Append this sample's /tf, /joint_states and /thrusters messages (channel, data) to ``out``."""
+    def _tf_poses(self, rows: list) -> list:
+        """Per row its bodies' frames in their parent body's frames, (nbody - 1, 7: x y z, qx qy qz
+        qw), or None (no /tf: no finite ``q_true``): ``mj_kinematics`` row by row, then for the whole
+        batch at once p = R_parent^T (x_child - x_parent), q = q_parent^-1 q_child (Hamilton product of
+        MuJoCo's w-first quaternions); a child of the world keeps its world pose."""
         import mujoco
 
+        out: list = [None] * len(rows)
+        if not self.has_tf:
+            return out
+        m, d, keep, xs, qs, rs = self.model, self.data, [], [], [], []
+        for i, row in enumerate(rows):
+            q = row.get("q_true")
+            if q is None:
+                continue
+            q = np.asarray(q, dtype=float)
+            if not math.isfinite(float(q.sum())):
+                continue
+            d.qpos[:] = q
+            mujoco.mj_kinematics(m, d)
+            keep.append(i)
+            xs.append(d.xpos.copy())
+            qs.append(d.xquat.copy())
+            rs.append(d.xmat.copy())
+        if not keep:
+            return out
+        par = self._parent
+        X, Q, R = np.array(xs), np.array(qs), np.array(rs).reshape(len(keep), -1, 3, 3)
+        pose = np.empty((len(keep), len(par), 7))
+        dx = (X[:, 1:] - X[:, par])[..., None]
+        pose[..., :3] = (np.swapaxes(R[:, par], -1, -2) @ dx)[..., 0]
+        qp, qc = Q[:, par], Q[:, 1:]
+        w1, x1, y1, z1 = qp[..., 0], -qp[..., 1], -qp[..., 2], -qp[..., 3]  # the conjugate: a unit q's inverse
+        w2, x2, y2, z2 = qc[..., 0], qc[..., 1], qc[..., 2], qc[..., 3]
+        pose[..., 3] = w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2
+        pose[..., 4] = w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2
+        pose[..., 5] = w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2
+        pose[..., 6] = w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2
+        for j, i in enumerate(keep):
+            out[i] = pose[j]
+        return out
+
+    def write_batch(self, outs: list, stamps: list, heads: list, rows: list) -> None:
+        """:meth:`write` for a batch of rows (their /tf numbers computed at once)."""
+        for out, stamp, head, row, pose in zip(outs, stamps, heads, rows, self._tf_poses(rows)):
+            self.write(out, stamp, head, row, pose)
+
+    def write(self, out: list, stamp: str, head: str, row: Mapping[str, Any], pose=False) -> None:
+        """Append this sample's /tf, /joint_states and /thrusters messages (channel, data) to ``out``;
+        ``pose``: its /tf numbers if already computed (:meth:`write_batch`)."""
         lay = self.layout
         if self.has_tf and "q_true" in row:
             q = np.asarray(row["q_true"], dtype=float)
             if math.isfinite(float(q.sum())):
-                d = self.data
-                d.qpos[:] = q
-                mujoco.mj_kinematics(self.model, d)
-                pose = self._pose_buf  # x y z, qx qy qz qw per body
-                pose[:, :3] = d.xpos[1:]
-                pose[:, 3:6] = d.xquat[1:, 1:]
-                pose[:, 6] = d.xquat[1:, 0]
+                if pose is False:
+                    pose = self._tf_poses([row])[0]
                 nums = _enc(pose.ravel().tolist())[1:-1].split(",")
                 msg = self._tf_tmpl.replace("\0", stamp) % tuple(nums)
                 out.append((self.tf_id, msg.encode()))

@@ -369,8 +369,8 @@ class McapRecorder(NavigationChannels):
         if self._has_q:
             self._encode_paper_frames(rows, stamps, out)
         if self._robot is not None:
-            for i, (_, _, _, row, _) in enumerate(rows):
-                self._robot.write(out[i], stamps[i].decode(), heads[i].decode(), row)
+            self._robot.write_batch(out, [x.decode() for x in stamps], [x.decode() for x in heads],
+                                    [r[3] for r in rows])
         return out
 
     def _every_row_at_once(self, rows: list[tuple], stamps: list[bytes], cids: list[int],

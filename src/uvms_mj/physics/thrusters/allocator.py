@@ -5,7 +5,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import lsq_linear
 
 from uvms_mj.physics.thrusters.matrix import _finite_array
 
@@ -234,6 +233,8 @@ class Allocator:
         if (~fixed).any():
             Af = A[:, ~fixed]
             bf = b - A[:, fixed] @ self.lo[fixed]
+            from scipy.optimize import lsq_linear  # here: scipy costs ~0.5 s to import, rarely needed
+
             res = lsq_linear(Af, bf, bounds=(self.lo[~fixed], self.hi[~fixed]), method="bvls", tol=1e-14,
                              lsq_solver="exact")
             u[~fixed] = np.clip(res.x, self.lo[~fixed], self.hi[~fixed])
