@@ -58,7 +58,7 @@ from typing import Optional
 import numpy as np
 
 from uvms_mj.estimation.measurements import DepthSample, DvlSample, FixSample, ImuSample, Mount
-from uvms_mj.estimation.models import (EstimatorError, depth_model, dvl_model, fix_model, skew, so3_exp,
+from uvms_mj.estimation.models import (EstimatorError, cross, depth_model, dvl_model, fix_model, skew, so3_exp,
                                        yaw_model)
 from uvms_mj.rotations import quat_from_rotvec, quat_mul, quat_to_mat
 
@@ -188,6 +188,9 @@ class ESKF:
                                  "expected 'difference' or 'none'")
         self._alpha = params.angular_acceleration == "difference"
         self._x, self._P = x, 0.5 * (P + P.T)
+        self._F, self._I3, self._skew_r = np.eye(15), np.eye(3), skew(self._ri)
+        self._qidx = np.arange(3, 15)
+        self._qdiag = np.repeat([self._na2, self._ng2, self._nab2, self._ngb2], 3)
         self._x0, self._P0 = self._x.copy(), self._P.copy()
         # history, one entry per IMU sample: sample, (x, P) after propagation to it, measurements assigned to it
         self._imu: list[ImuSample] = []
@@ -205,39 +208,39 @@ class ESKF:
         """Nominal (Eq. 260) and covariance (Eq. 269) from sample s0's time to s1's, the samples averaged."""
         dt = s1.t - s0.t
         ab, wb = x[10:13], x[13:16]
-        w0 = self._Rmi @ (np.asarray(s0.gyro, dtype=float) - wb)
-        w1 = self._Rmi @ (np.asarray(s1.gyro, dtype=float) - wb)
+        Rmi = self._Rmi
+        w0 = Rmi @ (s0.gyro - wb)
+        w1 = Rmi @ (s1.gyro - wb)
         w = 0.5 * (w0 + w1)
-        f_site = self._Rmi @ (0.5 * (np.asarray(s0.acc, dtype=float) + np.asarray(s1.acc, dtype=float)) - ab)
+        f_site = Rmi @ (0.5 * (s0.acc + s1.acc) - ab)
         r = self._ri
-        wr = np.cross(w, r)
-        f = f_site - np.cross(w, wr)
+        wr = cross(w, r)
+        f = f_site - cross(w, wr)
         if self._alpha:
-            f = f - np.cross((w1 - w0) / dt, r)
+            f = f - cross((w1 - w0) / dt, r)
         R = quat_to_mat(x[6:10])
-        a = R @ f + self._g
+        dR = so3_exp(w * dt)
+        # f rotated with the mid-interval attitude R Exp(w dt / 2) (second order; R alone drifts ~1 cm in 10 s)
+        a = R @ (so3_exp(0.5 * w * dt) @ f) + self._g
         xn = x.copy()
         xn[0:3] = x[0:3] + x[3:6] * dt + 0.5 * a * dt * dt
         xn[3:6] = x[3:6] + a * dt
         q = quat_mul(x[6:10], quat_from_rotvec(w * dt))
-        xn[6:10] = q / np.linalg.norm(q)
+        xn[6:10] = q / math.sqrt(q @ q)
         # F_x (Eq. 269) with the mount: df/dtheta via R, df/da_b = -R_m, df/dw_b = (dc/dw) R_m where
         # c = w x (w x r), dc/dw = -[w x r]x - [w]x [r]x
-        F = np.eye(15)
-        F[0:3, 3:6] = np.eye(3) * dt
-        F[3:6, 6:9] = -R @ skew(f) * dt
-        F[3:6, 9:12] = -R @ self._Rmi * dt
-        dc_dw = -skew(wr) - skew(w) @ skew(r)
-        F[3:6, 12:15] = R @ dc_dw @ self._Rmi * dt
-        F[6:9, 6:9] = so3_exp(w * dt).T
-        F[6:9, 12:15] = -self._Rmi * dt
+        F = self._F
+        F[0:3, 3:6] = self._I3 * dt
+        F[3:6, 6:9] = -(R @ skew(f)) * dt
+        RRm = R @ Rmi
+        F[3:6, 9:12] = -RRm * dt
+        F[3:6, 12:15] = (R @ (-skew(wr) - skew(w) @ self._skew_r) @ Rmi) * dt
+        F[6:9, 6:9] = dR.T
+        F[6:9, 12:15] = -Rmi * dt
         Pn = F @ P @ F.T
         # F_i Q_i F_i^T (Eq. 269): isotropic densities, so the rotations into world/body drop out
-        idx = np.arange(3)
-        Pn[3 + idx, 3 + idx] += self._na2 * dt
-        Pn[6 + idx, 6 + idx] += self._ng2 * dt
-        Pn[9 + idx, 9 + idx] += self._nab2 * dt
-        Pn[12 + idx, 12 + idx] += self._ngb2 * dt
+        idx = self._qidx
+        Pn[idx, idx] += self._qdiag * dt
         return xn, 0.5 * (Pn + Pn.T)
 
     # ---------------------------------------------------------------- update, injection, reset
@@ -279,6 +282,7 @@ class ESKF:
         """An IMU sample (site frame, the mount's): propagate to its time, apply the measurements due."""
         if not (np.shape(s.acc) == (3,) and np.shape(s.gyro) == (3,)):
             raise EstimatorError(f"ImuSample at t = {s.t}: acc and gyro must be (3,) arrays")
+        s = ImuSample(t=float(s.t), acc=np.asarray(s.acc, dtype=float), gyro=np.asarray(s.gyro, dtype=float))
         if self._imu:
             if not s.t > self._imu[-1].t:
                 raise EstimatorError(f"ImuSample.t = {s.t}: expected after the previous sample's {self._imu[-1].t}")

@@ -14,7 +14,7 @@ import numpy as np
 
 from uvms_mj.rotations import quat_to_mat
 
-__all__ = ["EstimatorError", "depth_model", "dvl_model", "fix_model", "skew", "so3_exp", "yaw_model"]
+__all__ = ["EstimatorError", "cross", "depth_model", "dvl_model", "fix_model", "skew", "so3_exp", "yaw_model"]
 
 
 class EstimatorError(ValueError):
@@ -24,6 +24,11 @@ class EstimatorError(ValueError):
 def skew(u: np.ndarray) -> np.ndarray:
     """[u]x, the cross-product matrix: skew(u) @ v = u x v."""
     return np.array([[0.0, -u[2], u[1]], [u[2], 0.0, -u[0]], [-u[1], u[0], 0.0]])
+
+
+def cross(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a x b for (3,) vectors (a lean np.cross)."""
+    return np.array([a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]])
 
 
 def so3_exp(rv: np.ndarray) -> np.ndarray:
@@ -40,7 +45,7 @@ def dvl_model(x: np.ndarray, w: np.ndarray, R_imu: np.ndarray, r_dvl: np.ndarray
     rate (vehicle body frame, from the gyro: ``w = R_imu (w_m - w_b)``), ``r_dvl``/``R_dvl`` the DVL mount."""
     R = quat_to_mat(x[6:10])
     vb = R.T @ x[3:6]
-    h = R_dvl.T @ (vb + np.cross(w, r_dvl))
+    h = R_dvl.T @ (vb + cross(w, r_dvl))
     H = np.zeros((3, 15))
     H[:, 3:6] = R_dvl.T @ R.T
     H[:, 6:9] = R_dvl.T @ skew(vb)
