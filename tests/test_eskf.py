@@ -66,7 +66,8 @@ def imu_truth(tr: dict) -> tuple[np.ndarray, np.ndarray]:
 
 def simulate(seed: int, T: float = 30.0, fix_delay: float = 0.0, fix_as_current: bool = False,
              dvl_gap: tuple = (), fix_period: float = 1.0, constant_bias: bool = False, log_every: int = 10,
-             fix_yaw: bool = False, sig0: np.ndarray | None = None):
+             fix_yaw: bool = False, sig0: np.ndarray | None = None, params: EskfParams = PARAMS,
+             outlier_at: float | None = None):
     """One run; returns times, errors (n, 15: dp dv dtheta da_b dw_b, truth minus estimate), covariances."""
     rng = np.random.default_rng(seed)
     n = int(round(T / DT)) + 1
@@ -88,7 +89,7 @@ def simulate(seed: int, T: float = 30.0, fix_delay: float = 0.0, fix_as_current:
     x0 = NavState(position=tr["p"][0] - e0[0:3], velocity=tr["v"][0] - e0[3:6],
                   quat=quat_mul(q_true0, quat_from_rotvec(-e0[6:9])), accel_bias=b0[:3] - e0[9:12],
                   gyro_bias=b0[3:] - e0[12:15])
-    f = ESKF(x0, np.diag(sig0 ** 2), PARAMS)
+    f = ESKF(x0, np.diag(sig0 ** 2), params)
     Rmd, rd = quat_to_mat(DVL.quat), DVL.position
     lag = int(round(fix_delay / DT))
     k_dvl, k_dep, k_fix = 20, 10, int(round(fix_period / DT))
@@ -105,6 +106,8 @@ def simulate(seed: int, T: float = 30.0, fix_delay: float = 0.0, fix_as_current:
         km = k - lag                     # the fix measured at step km arrives now
         if km > 0 and km % k_fix == 0:
             pos = tr["p"][km] + tr["R"][km] @ FIX.position + rng.standard_normal(3) * 0.1
+            if outlier_at is not None and abs(t[km] - outlier_at) < DT / 2:
+                pos = pos + np.array([10.0, -10.0, 0.0])     # a multipath USBL outlier, 14 m off
             tm = t[k] if fix_as_current else t[km]
             Rk = tr["R"][km]
             yaw = math.atan2(Rk[1, 0], Rk[0, 0]) + rng.standard_normal() * 0.02 if fix_yaw else None
@@ -184,6 +187,42 @@ def test_noise_free_propagation_follows_the_closed_form():
     assert np.linalg.norm(e.velocity - tr["v"][-1]) < 1e-3
     assert np.linalg.norm(rotation_log(quat_to_mat(e.quat).T @ tr["R"][-1])) < 1e-4
     np.testing.assert_allclose(e.angular_velocity, tr["w"][-1], atol=1e-9)
+
+
+def test_error_state_jacobian_matches_finite_differences_of_the_nominal_propagation():
+    """F_x (Eq. 269 with the IMU's lever arm 0.54 m, rotated mount, 2 rad/s rates) against central differences of
+    one nominal step over injected error states. Solà's F_x is first order in dt: the dt^2 terms it drops (e.g.
+    dp/dtheta = -R [f]x dt^2 / 2, ~5e-4 here) bound the difference; tolerance 1e-3, against block entries of
+    8e-3 (the lever-arm block dv/dw_b) to 8e-2 (dv/dtheta), so a missing or sign-flipped block fails."""
+    rng = np.random.default_rng(1)
+    imu = Mount(np.array([0.3, -0.4, 0.2]), quat_from_rpy(0.2, 0.1, 1.0))
+    f = ESKF(NavState(np.zeros(3), np.zeros(3), np.array([1.0, 0, 0, 0])), np.eye(15), EskfParams(imu_mount=imu))
+    x = np.concatenate([rng.standard_normal(6), quat_from_rpy(0.3, -0.2, 1.1), rng.standard_normal(6) * 0.01])
+    s0 = ImuSample(0.0, rng.standard_normal(3) + np.array([0, 0, 9.8]), rng.standard_normal(3) * 2)
+    s1 = ImuSample(0.01, s0.acc + 0.1 * rng.standard_normal(3), s0.gyro + 0.1 * rng.standard_normal(3))
+
+    def inject(d):
+        xx = x.copy()
+        xx[0:6] += d[0:6]
+        xx[6:10] = quat_mul(x[6:10], quat_from_rotvec(d[6:9]))
+        xx[10:16] += d[9:15]
+        return xx
+
+    def minus(a, b):
+        return np.concatenate([a[0:6] - b[0:6], rotation_log(quat_to_mat(b[6:10]).T @ quat_to_mat(a[6:10])),
+                               a[10:16] - b[10:16]])
+
+    Z = np.zeros((15, 15))
+    xn, _ = f._propagate(x, Z, s0, s1)
+    F = f._F.copy()
+    eps, num = 1e-6, np.zeros((15, 15))
+    for i in range(15):
+        d = np.zeros(15)
+        d[i] = eps
+        num[:, i] = (minus(f._propagate(inject(d), Z, s0, s1)[0], xn)
+                     - minus(f._propagate(inject(-d), Z, s0, s1)[0], xn)) / (2 * eps)
+    assert np.abs(F[3:6, 12:15]).max() > 5e-3
+    np.testing.assert_allclose(F, num, atol=1e-3)
 
 
 # --------------------------------------------------------------------------- consistency (NEES)
@@ -270,6 +309,19 @@ def test_camera_fix_with_yaw_corrects_a_large_heading_error():
     assert math.sqrt(covs_no[-1][8, 8]) > 1.5 * s_yaw
 
 
+def test_outlier_fix_is_gated():
+    """A fix 14 m off at t = 10 s. With fix_gate = chi2.ppf(0.999, 3) it is skipped: at 12 s the position error
+    is within 3 sigma and within 0.1 m (one fix's noise: the runs differ by that one fix's information) of the run
+    with a good fix there; ungated, the outlier pulls the estimate by more than 1 m."""
+    gate = EskfParams(**{**PARAMS.__dict__, "fix_gate": float(chi2.ppf(0.999, 3))})
+    clean = simulate(8, T=12.0, params=gate)[1][-1, 0:3]
+    _, errs, covs = simulate(8, T=12.0, params=gate, outlier_at=10.0)
+    raw = simulate(8, T=12.0, outlier_at=10.0)[1][-1, 0:3]
+    assert np.all(np.abs(errs[-1, 0:3]) < 3 * np.sqrt(np.diag(covs[-1])[0:3]))
+    assert np.linalg.norm(errs[-1, 0:3] - clean) < 0.1
+    assert np.linalg.norm(raw) > 1.0
+
+
 def test_measurement_ahead_of_the_imu_waits_and_too_old_is_rejected():
     t = np.arange(0, 3.0, DT)
     tr = truth(t)
@@ -320,3 +372,12 @@ def test_bad_samples_are_named():
         f.on_fix(FixSample(t=0.0, t_arrival=0.0, position=np.zeros(2)))
     with pytest.raises(EstimatorError, match="P0 shape"):
         ESKF(NavState(np.zeros(3), np.zeros(3), np.array([1.0, 0, 0, 0])), np.eye(3), PARAMS)
+
+
+def test_gate_counts_the_rejected_fix():
+    f = ESKF(NavState(np.zeros(3), np.zeros(3), np.array([1.0, 0, 0, 0])), P0,
+             EskfParams(gravity=G, fix_gate=16.27))
+    f.on_imu(ImuSample(t=0.0, acc=-G, gyro=np.zeros(3)))
+    f.on_fix(FixSample(t=0.0, t_arrival=0.0, position=np.array([20.0, 0.0, 0.0])))
+    f.on_fix(FixSample(t=0.0, t_arrival=0.0, position=np.array([0.1, 0.0, 0.0])))
+    assert f.gated == 1 and f.state().position[0] > 0.0

@@ -106,7 +106,9 @@ class EskfParams:
     the vehicle body frame (the depth sensor's and fix site's rotations matter only for the fix's yaw).
     ``dvl_sigma`` [m/s] per DVL-frame axis, ``depth_sigma`` [m], ``fix_sigma`` [m] per world axis, ``yaw_sigma``
     [rad]. ``buffer_s`` [s]: how far back a delayed measurement is replayed. ``angular_acceleration``:
-    "difference" or "none" (the lever arm's alpha x r term)."""
+    "difference" or "none" (the lever arm's alpha x r term). ``fix_gate`` / ``dvl_gate``: outlier gates on the
+    normalised innovation squared (e.g. ``scipy.stats.chi2.ppf(0.999, 3)`` = 16.27 for a position fix; 4 dof with
+    yaw), None = off."""
     gravity: np.ndarray = field(default_factory=lambda: np.array([0.0, 0.0, -9.81]))
     imu_mount: Mount = _IDENTITY_MOUNT
     dvl_mount: Mount = _IDENTITY_MOUNT
@@ -122,6 +124,8 @@ class EskfParams:
     yaw_sigma: float = 0.02
     buffer_s: float = 2.0
     angular_acceleration: str = "difference"
+    fix_gate: Optional[float] = None
+    dvl_gate: Optional[float] = None
 
 
 def _vec(name: str, value, n: int) -> np.ndarray:
@@ -187,6 +191,10 @@ class ESKF:
             raise EstimatorError(f"params.angular_acceleration = {params.angular_acceleration!r}: "
                                  "expected 'difference' or 'none'")
         self._alpha = params.angular_acceleration == "difference"
+        for name in ("fix_gate", "dvl_gate"):
+            if getattr(params, name) is not None:
+                _positive(f"params.{name}", getattr(params, name))
+        self._gated_ids: set = set()
         self._x, self._P = x, 0.5 * (P + P.T)
         self._F, self._I3, self._skew_r = np.eye(15), np.eye(3), skew(self._ri)
         self._qidx = np.arange(3, 15)
@@ -244,9 +252,14 @@ class ESKF:
         return xn, 0.5 * (Pn + Pn.T)
 
     # ---------------------------------------------------------------- update, injection, reset
-    def _update(self, x: np.ndarray, P: np.ndarray, innovation: np.ndarray, H: np.ndarray, V: np.ndarray):
-        """Eq. 272-276 (Joseph form), injection Eq. 282-283, reset Eq. 284-287."""
+    def _update(self, x: np.ndarray, P: np.ndarray, innovation: np.ndarray, H: np.ndarray, V: np.ndarray,
+                gate: Optional[float] = None, m=None):
+        """Eq. 272-276 (Joseph form), injection Eq. 282-283, reset Eq. 284-287. With ``gate``, a measurement whose
+        normalised innovation squared exceeds it is skipped (an outlier) and remembered in ``gated``."""
         S = H @ P @ H.T + V
+        if gate is not None and innovation @ np.linalg.solve(S, innovation) > gate:
+            self._gated_ids.add(id(m))
+            return x, P
         K = np.linalg.solve(S, H @ P).T
         dx = K @ innovation
         IKH = np.eye(15) - K @ H
@@ -264,7 +277,7 @@ class ESKF:
     def _apply(self, x: np.ndarray, P: np.ndarray, m, s: ImuSample):
         if isinstance(m, DvlSample):
             h, H = dvl_model(x, self._body_rate(x, s), self._Rmi, self._rd, self._Rmd)
-            return self._update(x, P, np.asarray(m.velocity, dtype=float) - h, H, self._Vdvl)
+            return self._update(x, P, np.asarray(m.velocity, dtype=float) - h, H, self._Vdvl, self.params.dvl_gate, m)
         if isinstance(m, DepthSample):
             h, H = depth_model(x, self._rp)
             return self._update(x, P, np.array([float(m.depth) - h]), H[None, :], np.array([[self._Vdepth]]))
@@ -275,7 +288,7 @@ class ESKF:
             dy = math.remainder(float(m.yaw) - hy, 2.0 * math.pi)
             innov, H = np.concatenate([innov, [dy]]), np.vstack([H, Hy])
             V = np.diag(np.concatenate([np.diag(V), [self._Vyaw]]))
-        return self._update(x, P, innov, H, V)
+        return self._update(x, P, innov, H, V, self.params.fix_gate, m)
 
     # ---------------------------------------------------------------- public interface
     def on_imu(self, s: ImuSample) -> None:
@@ -368,6 +381,11 @@ class ESKF:
         elif t is not None and t < last.t - 1e-12:
             raise EstimatorError(f"state(t = {t}): expected t >= the last IMU sample's {last.t}")
         return self._estimate(last.t if t is None else t, x, P, self._body_rate(x, last))
+
+    @property
+    def gated(self) -> int:
+        """How many measurements the outlier gates rejected."""
+        return len(self._gated_ids)
 
     @staticmethod
     def _estimate(t, x, P, w) -> NavEstimate:
