@@ -199,7 +199,6 @@ class ESKF:
         self._F, self._I3, self._skew_r = np.eye(15), np.eye(3), skew(self._ri)
         self._qidx = np.arange(3, 15)
         self._qdiag = np.repeat([self._na2, self._ng2, self._nab2, self._ngb2], 3)
-        self._x0, self._P0 = self._x.copy(), self._P.copy()
         # history, one entry per IMU sample: sample, (x, P) after propagation to it, measurements assigned to it
         self._imu: list[ImuSample] = []
         self._pre: list[tuple[np.ndarray, np.ndarray]] = []
