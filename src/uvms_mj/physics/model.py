@@ -25,6 +25,7 @@ from typing import Any
 import mujoco
 
 from uvms_mj.physics import build, config
+from uvms_mj.physics.mjwarnings import install_mujoco_warning_handler
 
 WATER, HYDRO, THRUSTER = "uvms.water", "uvms.hydro", "uvms.thruster"
 PLUGINS = (WATER, HYDRO, THRUSTER)
@@ -73,6 +74,7 @@ def load_spec(path: str | Path) -> mujoco.MjSpec:
     Raises:
         ModelError: the file does not exist or is not valid MJCF.
     """
+    install_mujoco_warning_handler()  # a warning while parsing: not into ./MUJOCO_LOG.TXT
     p = Path(path)
     if not p.is_file():
         raise ModelError(f"model file {str(p)!r} does not exist")
@@ -191,6 +193,7 @@ def compile_spec(spec: mujoco.MjSpec, *, native: bool | None = None, source: str
         ModelError: a bad hydrodynamic parameter (the message names the body, the attribute,
             the value and what is allowed), or a model MuJoCo cannot compile.
     """
+    install_mujoco_warning_handler()  # a warning while compiling: not into ./MUJOCO_LOG.TXT
     try:
         water, bodies = _read(spec)
     except config.HydroConfigError as exc:

@@ -10,7 +10,6 @@ and ``_io_layout()`` from the plant.
 from __future__ import annotations
 
 import math
-import threading
 from dataclasses import dataclass
 
 import mujoco
@@ -19,6 +18,7 @@ import numpy as np
 from uvms_mj.physics import model as _pm
 from uvms_mj.physics import python_backend as _pyb
 from uvms_mj.physics import reference as _ref
+from uvms_mj.physics.mjwarnings import install_mujoco_warning_handler, mujoco_warnings  # noqa: F401  (re-exported)
 
 __all__ = ["DivergenceError", "Energy", "Stepping", "install_mujoco_warning_handler", "mujoco_warnings"]
 
@@ -31,49 +31,6 @@ def _finite(x: np.ndarray) -> bool:
 #: What :meth:`Plant.step` saves before a batch of steps (restored for an exact replay).
 _SNAPSHOT = mujoco.mjtState.mjSTATE_INTEGRATION
 
-
-
-# MuJoCo's own warnings (mju_warning: e.g. "Nan, Inf or huge value in QACC") go by default to
-# stdout and to a MUJOCO_LOG.TXT in the current folder. They are routed instead to stderr and to
-# a per-process list that the closed loop puts in its run's metadata (RunResult.meta
-# "mujoco_warnings"). Each process (sweep workers included) installs its own handler.
-_MJ_WARNINGS: list[str] = []
-_MJ_WARNINGS_MAX = 100
-_mj_lock = threading.Lock()
-_mj_handler_pid: int | None = None
-
-
-def _on_mujoco_warning(msg: str) -> None:
-    text = " ".join(str(msg).split())
-    with _mj_lock:
-        if len(_MJ_WARNINGS) < _MJ_WARNINGS_MAX:
-            _MJ_WARNINGS.append(text)
-    try:
-        import sys
-
-        sys.stderr.write(f"mujoco warning: {text}\n")
-    except Exception:  # noqa: BLE001 - a closed stderr must not break the simulation
-        pass
-
-
-def install_mujoco_warning_handler() -> None:
-    """Route MuJoCo's warnings to stderr and :func:`mujoco_warnings` instead of MUJOCO_LOG.TXT
-    (once per process; done by every Plant)."""
-    global _mj_handler_pid
-    import os
-
-    if _mj_handler_pid != os.getpid():
-        mujoco.set_mju_user_warning(_on_mujoco_warning)
-        _mj_handler_pid = os.getpid()
-
-
-def mujoco_warnings(clear: bool = True) -> list[str]:
-    """MuJoCo warnings seen in this process since the last call (with ``clear``)."""
-    with _mj_lock:
-        out = list(_MJ_WARNINGS)
-        if clear:
-            _MJ_WARNINGS.clear()
-    return out
 
 
 class DivergenceError(RuntimeError):
