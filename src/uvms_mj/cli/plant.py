@@ -38,6 +38,9 @@ def paper(controllers: str, duration: float, thruster_lag: float | None, ideal: 
     if unknown:
         raise click.BadParameter(f"unknown controller(s) {', '.join(unknown)}; registered: {', '.join(available())}",
                                  param_hint="--controllers")
+    twice = sorted({c for c in names if names.count(c) > 1})
+    if twice:
+        raise click.BadParameter(f"{', '.join(twice)} given twice: each controller once", param_hint="--controllers")
     if thruster_lag is not None:
         from uvms_mj.scenario.schema import LAG_STABILITY
 

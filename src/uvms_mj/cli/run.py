@@ -202,6 +202,10 @@ def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str
     if unknown or not names:
         raise click.BadParameter(f"unknown controller(s) {', '.join(unknown) or '(none given)'}; "
                                  f"registered: {', '.join(available())}", param_hint="--controllers")
+    twice = sorted({c for c in names if names.count(c) > 1})
+    if twice:
+        raise click.BadParameter(f"{', '.join(twice)} given twice: each controller once (one log each)",
+                                 param_hint="--controllers")
     results, logs, failed, status, runs = {}, {}, [], {}, {}
     _check_dir(out_dir)
     base = _load(scenario, sets)

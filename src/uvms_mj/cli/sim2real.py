@@ -182,7 +182,7 @@ def _cfg(dt: float | None, neutral: bool):
 @click.option("--dt", type=float, default=None, help="Physics step [s] (default: the model's, 0.002 s).")
 @click.option("--as-is", "as_is", is_flag=True, default=False,
               help="Keep the model's mass as written (default: made neutrally buoyant through the vehicle mass).")
-@click.option("--jobs", type=int, default=None, help="Worker processes (default: min(2, CPUs)).")
+@click.option("--jobs", type=click.IntRange(min=1), default=None, help="Worker processes (default: min(2, CPUs)).")
 @click.option("--plot-nominal", is_flag=True, default=False,
               help="With --overrides and --plots: also draw the model without the overrides (dashed).")
 def sim2real(data_dir, trial_names, model, overrides, json_out, plots_dir, dt, as_is, jobs, plot_nominal) -> None:
@@ -248,7 +248,7 @@ def sim2real(data_dir, trial_names, model, overrides, json_out, plots_dir, dt, a
 @click.option("--json", "json_out", metavar="PATH|-", default=None, help=_JSON_HELP)
 @click.option("--fit-dt", type=float, default=None, help="Physics step of the fit [s] (default 0.01).")
 @click.option("--max-nfev", type=int, default=30, show_default=True, help="Most optimiser evaluations per fit.")
-@click.option("--jobs", type=int, default=None, help="Worker processes (default: min(2, CPUs)).")
+@click.option("--jobs", type=click.IntRange(min=1), default=None, help="Worker processes (default: min(2, CPUs)).")
 @click.option("--quiet", is_flag=True, default=False, help="No progress lines.")
 def identify_cmd(data_dir, fit_names, score_names, cv, trial_names, param_names, model, overrides, out, json_out, fit_dt,
              max_nfev, jobs, quiet) -> None:
@@ -291,6 +291,9 @@ def identify_cmd(data_dir, fit_names, score_names, cv, trial_names, param_names,
     missing = [n for n in fit if n not in ts.trials]
     if missing:
         raise click.UsageError(f"--fit: trial(s) {', '.join(missing)} not usable (skipped or absent)")
+    missing = [n for n in (score or []) if n not in ts.trials]
+    if missing:
+        raise click.UsageError(f"--score: trial(s) {', '.join(missing)} not usable (skipped or absent)")
     if cv is None:
         score = [n for n in (score or sorted(ts.trials)) if n in ts.trials and n not in fit]
         overlap = sorted(set(fit) & set(_names(score_names) or []))

@@ -22,7 +22,7 @@ from uvms_mj.cli.common import EXIT_INTERRUPTED, SCENARIO, _check_dir, _io_error
               help="process: local process pool; ray: Ray tasks (pip install 'uvms-mj[ray]'); serial: here.")
 @click.option("--controllers", default="rac,rac_dob", show_default=True,
               help="Comma-separated controllers; every sample runs with each (same parameters and seed).")
-@click.option("--seed", type=click.IntRange(min=0), default=0, show_default=True,
+@click.option("--seed", type=click.IntRange(min=0, max=2**63 - 1), default=0, show_default=True,
               help="Sweep seed: sampled parameters and per-run seeds derive from it.")
 @click.option("--set", "sets", multiple=True, metavar="KEY.PATH=VALUE",
               help="Override a scenario field for every run, e.g. --set duration=10.")
