@@ -148,8 +148,12 @@ def load_overrides(path: str | Path) -> dict[str, Any]:
     p = Path(path)
     if not p.is_file():
         raise OverrideError(f"override file {str(p)!r} does not exist")
+    if p.stat().st_size > 1_000_000:  # ours: an override file is a few hundred bytes (identify writes one)
+        raise OverrideError(f"{p}: {p.stat().st_size} bytes; an override file is at most 1000000 bytes")
     try:
         doc = yaml.safe_load(p.read_text())
+    except UnicodeDecodeError as e:
+        raise OverrideError(f"{p}: not a UTF-8 text file (byte {e.start}: {e.reason})") from None
     except (OSError, yaml.YAMLError) as e:
         raise OverrideError(f"{p}: unreadable YAML: {' '.join(str(e).split())}") from None
     if doc is None:

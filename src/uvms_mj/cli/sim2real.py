@@ -165,8 +165,8 @@ def _write(json_out, data) -> None:
 def _cfg(dt: float | None, neutral: bool):
     from uvms_mj.analysis.sim2real import SimConfig
 
-    if dt is not None and not (0 < dt <= 0.05):
-        raise click.UsageError(f"--dt must lie in (0, 0.05] s, got {dt}")
+    if dt is not None and not (1e-5 <= dt <= 0.05):  # 1e-5 s: the scenarios' smallest physics.timestep
+        raise click.UsageError(f"--dt must lie in [1e-05, 0.05] s, got {dt}")
     return SimConfig(dt=dt, neutral=neutral)
 
 
@@ -271,8 +271,8 @@ def identify_cmd(data_dir, fit_names, score_names, cv, trial_names, param_names,
     unknown = [p for p in names if p not in PARAMETERS]
     if unknown:
         raise click.UsageError(f"--params: unknown parameter(s) {', '.join(unknown)} (known: {', '.join(PARAMETERS)})")
-    if fit_dt is not None and not (0 < fit_dt <= 0.05):
-        raise click.UsageError(f"--fit-dt must lie in (0, 0.05] s, got {fit_dt}")
+    if fit_dt is not None and not (1e-5 <= fit_dt <= 0.05):
+        raise click.UsageError(f"--fit-dt must lie in [1e-05, 0.05] s, got {fit_dt}")
     if max_nfev < 1:
         raise click.UsageError(f"--max-nfev must be >= 1, got {max_nfev}")
     if cv is None and not fit_names:
