@@ -389,8 +389,19 @@ class _Reader:
         if path is None or not path.is_file():
             self.add(path, None, "file missing", severity)
             return None
-        with open(path, newline="") as fh:
-            text = fh.read().splitlines()
+        try:
+            with open(path, newline="", encoding="utf-8") as fh:
+                raw_text = fh.read()
+        except UnicodeDecodeError as e:
+            self.add(path, None, f"not UTF-8 text (byte {e.start}: {e.reason})", severity)
+            return None
+        except OSError as e:
+            self.add(path, None, f"unreadable: {e.strerror or e}", severity)
+            return None
+        text = raw_text.splitlines()
+        if text and raw_text and raw_text[-1] not in "\r\n":
+            # a file cut while it was written (its last field may be cut short too)
+            self.add(path, len(text), "the last line has no line end: the file may be cut short there", "warning")
         if not text or not text[0].strip():
             self.add(path, 1, "empty file (no header)", severity)
             return None
@@ -423,8 +434,8 @@ class _Reader:
                 continue
             rows.append(vals)
             lines.append(ln)
-        if not rows:
-            self.add(path, None, "no data rows", severity)
+        if len(rows) < 2:  # a time series needs two samples (rates, interpolation)
+            self.add(path, None, "no data rows" if not rows else "one data row: at least 2 are needed", severity)
             return None
         a = np.array(rows)
         lines_a = np.array(lines)
@@ -497,9 +508,12 @@ def _read_start_time(r: _Reader, path: Path) -> tuple[float | None, bool]:
         r.add(path, None, "no start_time")
         return None, False
     v = doc["start_time"]
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)) or v < 0:
-        r.add(path, line, f"start_time must be a finite number >= 0 [s], got {v!r}")
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(float(v)):
+        r.add(path, line, f"start_time must be a finite number [s], got {v!r}")
         return None, False
+    if v < 0:  # only the static check uses it: the trial is kept, its start unknown
+        r.add(path, line, f"start_time {v!r} s < 0: ignored (start of the motion unknown)", "warning")
+        return None, True
     return float(v), True
 
 
@@ -566,6 +580,15 @@ def load_trial(name: str, files: Mapping[str, Path], offsets: np.ndarray,
             roll=c["roll"], pitch=c["pitch"], yaw=c["yaw"], lines=lines,
         )
 
+    if len(joints.t) < 2 or min(imu.t[-1], joints.t[-1]) <= max(imu.t[0], joints.t[0]):
+        r.add(files["imu"], None, f"the IMU record ({imu.t[0]:.3f}..{imu.t[-1]:.3f} s) and the joint record "
+              f"({joints.t[0]:.3f}..{joints.t[-1]:.3f} s) do not overlap (one clock, time_secs)")
+        return None
+    if abs(imu.t[-1] - joints.t[-1]) > 1.0 or abs(imu.t[0] - joints.t[0]) > 1.0:
+        # ours: 1 s, several samples of either record (IMU 20 Hz, joints ~21 Hz)
+        r.add(files["imu"], None, f"the IMU record ({imu.t[0]:.3f}..{imu.t[-1]:.3f} s) and the joint record "
+              f"({joints.t[0]:.3f}..{joints.t[-1]:.3f} s) differ by more than 1 s at an end: the trial is used over "
+              "their overlap only", "warning")
     if start_time is not None and not imu.t[0] < start_time < imu.t[-1]:
         r.add(files["metadata"], None,
               f"start_time {start_time} s outside the IMU record {imu.t[0]:.3f}..{imu.t[-1]:.3f} s", "warning")
@@ -593,6 +616,9 @@ def load_trials(folder: str | Path, model=None, offsets: Iterable[float] | None 
         FileNotFoundError: ``folder`` is not a folder.
     """
     folder = Path(folder)
+    if folder.is_file():
+        raise FileNotFoundError(f"trials folder {str(folder)!r} is a file: give the folder that holds the "
+                                "trials' CSV files")
     if not folder.is_dir():
         raise FileNotFoundError(f"trials folder {str(folder)!r} does not exist")
     off = np.asarray(list(offsets), float) if offsets is not None else joint_offsets(model)

@@ -48,6 +48,9 @@ def _trial_dir(path: str | None) -> Path:
             sys.exit(2)
         path = str(found)
     p = Path(path)
+    if p.exists() and not p.is_dir():
+        raise click.UsageError(f"data folder {path!r} is a file: give the folder that holds the trials' CSV files "
+                               f"(here: {str(p.parent)!r})")
     if not p.is_dir():
         raise click.UsageError(f"data folder {path!r} does not exist")
     sub = p / "trials"
@@ -77,9 +80,16 @@ def _load(data_dir: str, model: str, overrides: str | None, names, neutral: bool
     for issue in ts.issues:
         if issue.severity == "error":
             click.echo(str(issue), err=True)
-    nwarn = sum(1 for i in ts.issues if i.severity != "error")
-    if nwarn:
-        echo(f"{nwarn} warning(s) while reading (mocap gaps, missing metadata...; listed in the JSON)")
+    warns = [i for i in ts.issues if i.severity != "error"]
+    if warns:
+        # the ones that change what is used (a file cut short, a dropped mocap, an unknown start,
+        # records of different lengths) by name; the routine ones (mocap gaps) counted
+        named = [i for i in warns if not i.message.startswith("gap of") and "no metadata file" not in i.message]
+        for i in named[:10]:
+            echo(str(i))
+        rest = len(warns) - min(len(named), 10)
+        if rest:
+            echo(f"{rest} other warning(s) while reading (mocap gaps, missing metadata...; listed in the JSON)")
     for name in ts.skipped:
         click.echo(f"skipped trial {name}: " + "; ".join(
             (f"{i.file.name}{'' if i.line is None else f':{i.line}'}: " if i.file else "") + i.message
