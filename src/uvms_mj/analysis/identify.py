@@ -423,7 +423,10 @@ def write_overrides(path: str | Path, overrides: Mapping[str, Any], header: str 
                  [float(x) for x in v] if isinstance(v, (list, tuple)) else float(v)) for k, v in overrides.items()}
     text = "".join(f"# {line}\n" for line in header.splitlines()) + yaml.safe_dump(clean, sort_keys=True,
                                                                                      default_flow_style=None)
-    p.write_text(text)
+    from uvms_mj.io.atomic import atomic_open
+
+    with atomic_open(p, "w", mkdir=False, encoding="utf-8") as f:
+        f.write(text)
     return p
 
 

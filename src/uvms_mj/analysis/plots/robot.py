@@ -8,6 +8,8 @@ from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
+
+from uvms_mj.io.atomic import atomic_path
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
@@ -262,7 +264,8 @@ def _plot_robot_run(log, robot: Mapping[str, Any], out: Path, stem: str) -> list
                                 ("actuation", _robot_actuation_figure, f"{robot.get('name')} actuation")):
         fig = build(log, robot, f"{name}: {what}")
         path = out / f"{stem}_{suffix}.png"
-        fig.savefig(path, dpi=_DPI)
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=_DPI, format="png")
         paths.append(path)
     return paths
 
@@ -313,5 +316,6 @@ def _plot_robot_comparison(logs: Mapping[str, Any], out_path: Path) -> Path:
         if t_hi > t_lo:
             a.set_xlim(t_lo, t_hi)
     ax[2].set_xlabel("time t [s]")
-    fig.savefig(out_path, dpi=_DPI)
+    with atomic_path(out_path) as tmp:
+        fig.savefig(tmp, dpi=_DPI, format="png")
     return out_path

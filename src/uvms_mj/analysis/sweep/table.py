@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 import re
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from uvms_mj.io.atomic import atomic_open, atomic_path
 from uvms_mj.analysis.sweep.plan import Run, SweepPlan, _jsonable
 from uvms_mj.analysis.sweep.spec import _is_num
 
@@ -53,13 +53,11 @@ def _cell(v: Any) -> Any:
 def _write_table(plan: SweepPlan, rows: list[dict], out: Path) -> list[Path]:
     cols = _columns(plan, rows)
     paths = []
-    tmp = out / "results.csv.tmp"
-    with open(tmp, "w", newline="", encoding="utf-8") as f:
+    with atomic_open(out / "results.csv", "w", newline="", encoding="utf-8") as f:
         w = csv.writer(f)
         w.writerow(cols)
         for r in rows:
             w.writerow([_cell(r.get(c, "")) for c in cols])
-    os.replace(tmp, out / "results.csv")
     paths.append(out / "results.csv")
     try:
         import pyarrow as pa
@@ -71,7 +69,8 @@ def _write_table(plan: SweepPlan, rows: list[dict], out: Path) -> list[Path]:
     for c in [a.column for a in plan.axes]:
         if any(not _is_num(v) for v in data[c]):
             data[c] = [json.dumps(_jsonable(v)) for v in data[c]]
-    pq.write_table(pa.table(data), out / "results.parquet")
+    with atomic_path(out / "results.parquet") as tmp:
+        pq.write_table(pa.table(data), str(tmp))
     paths.append(out / "results.parquet")
     return paths
 
