@@ -213,7 +213,8 @@ def test_render_exits_5_when_ffmpeg_fails(cli, log, tmp_path, monkeypatch):
     import imageio_ffmpeg
 
     fake = tmp_path / "ffmpeg"
-    fake.write_text("#!/bin/sh\nfor a; do out=$a; done\ncat > /dev/null\nprintf '\\000\\000\\000\\040ftypisom' > \"$out\"\n"
+    fake.write_text("#!/bin/sh\nfor a; do out=$a; done\ncat > /dev/null\n"
+                    "printf '\\000\\000\\000\\040ftypisom' > \"$out\"\n"
                     "echo 'av_interleaved_write_frame(): No space left on device' >&2\n"
                     "echo 'Error writing trailer: No space left on device' >&2\nexit 1\n")
     fake.chmod(fake.stat().st_mode | stat.S_IXUSR)
