@@ -26,7 +26,7 @@ from uvms_mj.analysis.render_gl import configure_gl
 configure_gl()  # a rendering-only entry path: MUJOCO_GL chosen (headless) before mujoco is imported
 
 from uvms_mj.sim.experiment import PaperExperiment  # noqa: E402
-from uvms_mj.analysis.render import RenderError, _open_writer, gl_status, render_frames, render_video  # noqa: E402
+from uvms_mj.analysis.render import RenderError, _VideoWriter, gl_status, render_frames, render_video  # noqa: E402
 
 
 def main() -> int:
@@ -65,7 +65,7 @@ def main() -> int:
         best_encode = 0.0
         for _ in range(args.repeats):
             t0 = time.perf_counter()
-            writer = _open_writer(Path(tmp) / "enc.mp4", width, height, fps)
+            writer = _VideoWriter(Path(tmp) / "enc.mp4", width, height, fps)
             for f in frames:
                 writer.send(f)
             writer.close()

@@ -58,7 +58,6 @@ from uvms_mj.analysis.sim2real import (
     score_trial,
     simulate_trial,
 )
-from uvms_mj.io.interrupts import partial_output
 
 __all__ = ["run_trials", "PARAMETERS", "DEFAULT_PARAMS", "Parameter", "IdentifyResult", "cross_validate", "identify",
            "nominal_values", "overrides_for", "write_overrides"]
@@ -424,8 +423,10 @@ def write_overrides(path: str | Path, overrides: Mapping[str, Any], header: str 
                  [float(x) for x in v] if isinstance(v, (list, tuple)) else float(v)) for k, v in overrides.items()}
     text = "".join(f"# {line}\n" for line in header.splitlines()) + yaml.safe_dump(clean, sort_keys=True,
                                                                                      default_flow_style=None)
-    with partial_output(p):
-        p.write_text(text)
+    from uvms_mj.io.atomic import atomic_open
+
+    with atomic_open(p, "w", mkdir=False, encoding="utf-8") as f:
+        f.write(text)
     return p
 
 

@@ -24,12 +24,17 @@ the public names of the others, so ``uvms_mj.analysis.render`` stays the one imp
 
 from __future__ import annotations
 
+import errno
+import os
+import subprocess
+import tempfile
 import time
 from pathlib import Path
 from typing import Any, Callable, Iterator
 
 import numpy as np
 
+from uvms_mj.io.atomic import atomic_path
 from uvms_mj.analysis.render_overlay import _ErrorInset, _controller_name, _tip_error_mm
 from uvms_mj.analysis.render_scene import _Replay
 from uvms_mj.analysis.render_robot import _RobotReplay, _replay, _robot_error_mm, robot_of
@@ -74,33 +79,59 @@ def render_frames(
         replay.close()
 
 
-def _open_writer(out_path: Path, width: int, height: int, fps: float):
-    import imageio_ffmpeg
-
-    if width % 2 or height % 2:
-        raise ValueError(f"size = ({width}, {height}): H.264 with yuv420p needs even width and height")
-    writer = imageio_ffmpeg.write_frames(
-        str(out_path), (width, height), fps=fps, codec="libx264", pix_fmt_in="rgb24", pix_fmt_out="yuv420p",
-        quality=None, macro_block_size=2, ffmpeg_log_level="error",
-        output_params=["-preset", "veryfast", "-crf", "23", "-movflags", "+faststart"],
-    )
-    writer.send(None)
-    return writer
+_ERRNO_TEXT = {os.strerror(e): e for e in (errno.ENOSPC, errno.EDQUOT, errno.EACCES, errno.EROFS, errno.EIO)}
 
 
-def _close_writer(writer, finished: bool) -> None:
-    """Let ffmpeg finish the MP4 (``finished``), or kill it at once (an interrupt or an error: no
-    waiting for the encoder; the caller removes the file, e.g. with
-    :func:`uvms_mj.io.interrupts.partial_output`)."""
-    if writer is None:
-        return
-    if finished:
-        writer.close()
-        return
-    try:
-        writer.throw(KeyboardInterrupt)  # imageio-ffmpeg kills ffmpeg on KeyboardInterrupt, then re-raises it
-    except (KeyboardInterrupt, StopIteration):
-        pass
+class _VideoWriter:
+    """The ffmpeg of imageio-ffmpeg encoding RGB frames from a pipe (H.264, yuv420p, MP4 with
+    +faststart). :meth:`close` waits for ffmpeg and raises OSError (one line: ffmpeg's last
+    message, errno ENOSPC etc. when it names one) when it failed, e.g. on a full disk, instead of
+    leaving a broken MP4 behind a success; :meth:`abort` kills it. Write to a temporary path
+    (:func:`uvms_mj.io.atomic.atomic_path`) so that a failed video never has the final name."""
+
+    def __init__(self, out_path: Path, width: int, height: int, fps: float) -> None:
+        import imageio_ffmpeg
+
+        if width % 2 or height % 2:
+            raise ValueError(f"size = ({width}, {height}): H.264 with yuv420p needs even width and height")
+        cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-loglevel", "error", "-f", "rawvideo", "-vcodec", "rawvideo",
+               "-s", f"{width}x{height}", "-pix_fmt", "rgb24", "-r", f"{fps:.12g}", "-i", "-", "-an",
+               "-vcodec", "libx264", "-pix_fmt", "yuv420p", "-preset", "veryfast", "-crf", "23",
+               "-movflags", "+faststart", "-f", "mp4", str(out_path)]
+        self._err = tempfile.TemporaryFile()
+        # Its own session: a Ctrl-C reaches us, not ffmpeg (we stop it; as imageio-ffmpeg does).
+        self._p = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=self._err,
+                                   start_new_session=True)
+
+    def _failure(self, rc) -> OSError:
+        self._err.seek(0)
+        lines = [ln.strip() for ln in self._err.read().decode("utf-8", "replace").splitlines() if ln.strip()]
+        self._err.close()
+        last = lines[-1] if lines else f"exit status {rc}"
+        code = next((e for text, e in _ERRNO_TEXT.items() if any(text in ln for ln in lines)), errno.EIO)
+        return OSError(code, f"ffmpeg failed: {os.strerror(code)} ({last[:200]})")
+
+    def send(self, frame: np.ndarray) -> None:
+        try:
+            self._p.stdin.write(memoryview(np.ascontiguousarray(frame)).cast("B"))
+        except (BrokenPipeError, OSError):
+            self._p.kill()
+            raise self._failure(self._p.wait()) from None
+
+    def close(self) -> None:
+        try:
+            self._p.stdin.close()
+        except OSError:
+            pass
+        rc = self._p.wait()
+        if rc != 0:
+            raise self._failure(rc)
+        self._err.close()
+
+    def abort(self) -> None:
+        self._p.kill()
+        self._p.wait()
+        self._err.close()
 
 
 def render_video(
@@ -159,25 +190,28 @@ def render_video(
     t_start = time.perf_counter()
     replay = _replay(log, fps, (width, height), camera, speed, max_seconds, model_path, clock=True, labels=labels)
     setup_s = time.perf_counter() - t_start
-    render_s, n, writer, finished = 0.0, 0, None, False
+    render_s, n = 0.0, 0
     try:
-        out_path.parent.mkdir(parents=True, exist_ok=True)
-        writer = _open_writer(out_path, width, height, fps)
-        frames = iter(replay)
-        while True:
-            t0 = time.perf_counter()
-            item = next(frames, None)
-            render_s += time.perf_counter() - t0
-            if item is None:
-                break
-            writer.send(np.ascontiguousarray(item[1]))
-            n += 1
-            if on_frame is not None:
-                on_frame(n - 1, len(replay))
-        finished = True
+        with atomic_path(out_path) as tmp:
+            writer = _VideoWriter(tmp, width, height, fps)
+            try:
+                frames = iter(replay)
+                while True:
+                    t0 = time.perf_counter()
+                    item = next(frames, None)
+                    render_s += time.perf_counter() - t0
+                    if item is None:
+                        break
+                    writer.send(item[1])
+                    n += 1
+                    if on_frame is not None:
+                        on_frame(n - 1, len(replay))
+            except BaseException:
+                writer.abort()
+                raise
+            writer.close()
     finally:
         replay.close()
-        _close_writer(writer, finished)
     wall = time.perf_counter() - t_start
     return {
         "path": str(out_path),
@@ -294,31 +328,34 @@ def render_compare_video(
     setup_s = time.perf_counter() - t_start
     total = max(len(a), len(b))
     frame = np.zeros((height + (strip if err is not None else 0), 2 * half, 3), dtype=np.uint8)
-    render_s, n, writer, finished = 0.0, 0, None, False
+    render_s, n = 0.0, 0
     try:
-        out_path.parent.mkdir(parents=True, exist_ok=True)
-        writer = _open_writer(out_path, frame.shape[1], frame.shape[0], fps)
-        ia, ib = iter(a), iter(b)
-        for i in range(total):
-            t0 = time.perf_counter()
-            tf = None
-            for it, x0 in ((ia, 0), (ib, half)):
-                item = next(it, None)
-                if item is not None:
-                    frame[:height, x0:x0 + half] = item[1]
-                    tf = item[0] if tf is None else max(tf, item[0])
-            if err is not None and tf is not None:
-                frame[height:] = err.frame(tf)
-            render_s += time.perf_counter() - t0
-            writer.send(np.ascontiguousarray(frame))
-            n += 1
-            if on_frame is not None:
-                on_frame(i, total)
-        finished = True
+        with atomic_path(out_path) as tmp:
+            writer = _VideoWriter(tmp, frame.shape[1], frame.shape[0], fps)
+            try:
+                ia, ib = iter(a), iter(b)
+                for i in range(total):
+                    t0 = time.perf_counter()
+                    tf = None
+                    for it, x0 in ((ia, 0), (ib, half)):
+                        item = next(it, None)
+                        if item is not None:
+                            frame[:height, x0:x0 + half] = item[1]
+                            tf = item[0] if tf is None else max(tf, item[0])
+                    if err is not None and tf is not None:
+                        frame[height:] = err.frame(tf)
+                    render_s += time.perf_counter() - t0
+                    writer.send(frame)
+                    n += 1
+                    if on_frame is not None:
+                        on_frame(i, total)
+            except BaseException:
+                writer.abort()
+                raise
+            writer.close()
     finally:
         a.close()
         b.close()
-        _close_writer(writer, finished)
     return {
         "path": str(out_path),
         "frames": n,

@@ -60,7 +60,6 @@ from uvms_mj.analysis.trials import (
     lowpass,
     roll_pitch_yaw,
 )
-from uvms_mj.io.interrupts import partial_output
 
 __all__ = [
     "DEFAULT_MODEL",
@@ -598,7 +597,9 @@ def plot_trial(trial: Trial, sim: SimResult, score: TrialScore | None, path: str
     fig.suptitle(title or f"trial {trial.name}", fontsize=10)
     fig.tight_layout()
     p = Path(path)
-    with partial_output(p):
-        fig.savefig(p, dpi=dpi)
+    from uvms_mj.io.atomic import atomic_path
+
+    with atomic_path(p) as tmp:
+        fig.savefig(tmp, dpi=dpi, format="png")
     plt.close(fig)
     return p

@@ -72,26 +72,31 @@ def _interrupted() -> None:
 
 def _io_error(path, exc: OSError) -> None:
     """An output that could not be written: one line, exit EXIT_IO."""
-    click.echo(f"error: cannot write {path}: {exc.strerror or exc}", err=True)
+    why = exc.strerror or str(exc) or type(exc).__name__
+    why = " ".join(why.split())[:300]  # one line, whatever the OSError carried (ffmpeg's text...)
+    click.echo(f"error: cannot write {path}: {why}", err=True)
     sys.exit(EXIT_IO)
 
 
-def _check_out(path, protect: tuple = (), kind: str = "log", magic: bytes | None = b"\x89MCAP") -> Path:
-    from uvms_mj.io.recorder import OutputPathError, check_output_path
+def _check_out(path, protect: tuple = (), kind: str = "log", option: str | None = None, **magic) -> Path:
+    """:func:`uvms_mj.io.paths.check_output_path` with a refusal as a usage error (exit 2):
+    one line naming ``option`` (when given), the path and why. ``protect``: the command's inputs;
+    ``kind``: a key of :data:`uvms_mj.io.paths.OUTPUT_KINDS` (or ``magic=`` to override)."""
+    from uvms_mj.io.paths import OutputPathError, check_output_path
 
     try:
-        return check_output_path(path, protect=protect, kind=kind, magic=magic)
+        return check_output_path(path, protect=tuple(protect), kind=kind, **magic)
     except OutputPathError as exc:
-        raise click.UsageError(str(exc)) from None
+        raise click.UsageError(f"{option}: {exc}" if option else str(exc)) from None
 
 
-def _check_dir(path) -> Path:
-    from uvms_mj.io.recorder import OutputPathError, check_output_dir
+def _check_dir(path, option: str | None = None) -> Path:
+    from uvms_mj.io.paths import OutputPathError, check_output_dir
 
     try:
         return check_output_dir(path)
     except OutputPathError as exc:
-        raise click.UsageError(str(exc)) from None
+        raise click.UsageError(f"{option}: {exc}" if option else str(exc)) from None
 
 
 def _warn(scenario) -> None:
@@ -128,15 +133,17 @@ def _write_json(data: dict, dest: str) -> None:
             return clean(x.item())
         return x
 
+    from uvms_mj.io.atomic import atomic_open
+
     text = json.dumps(clean(data), indent=2, allow_nan=False)
     if dest == "-":
         click.echo(text)
-    else:
-        from uvms_mj.io.interrupts import partial_output
-
-        Path(dest).parent.mkdir(parents=True, exist_ok=True)
-        with partial_output(dest):
-            Path(dest).write_text(text + "\n")
+        return
+    try:
+        with atomic_open(dest, "w", encoding="utf-8") as f:
+            f.write(text + "\n")
+    except OSError as exc:
+        _io_error(dest, exc)
 
 
 class ScenarioPath(click.ParamType):

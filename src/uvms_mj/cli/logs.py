@@ -41,7 +41,7 @@ def render(logs: tuple[str, ...], out: str | None, out_old: str | None, compare:
         path = Path(out) if out else first.with_name(f"{first.stem}-vs-{Path(logs[1]).stem}.mp4")
     else:
         path = Path(out) if out else first.with_suffix(".mp4")
-    _check_out(path, protect=logs, kind="video", magic=None)
+    _check_out(path, protect=logs, kind="video", option="--out")
     runs = [_read(p) for p in logs]
     try:
         with _progress(f"render {path.name}", "frame") as tick, partial_output(path):
@@ -67,10 +67,12 @@ def render(logs: tuple[str, ...], out: str | None, out_old: str | None, compare:
 @click.option("-o", "out_dir_old", type=click.Path(file_okay=False), default=None, hidden=True)
 def plot(log: str, out_dir: str | None, out_dir_old: str | None) -> None:
     """Paper-style time histories (Figs. 5 and 6) and control signals of LOG, as PNG."""
-    from uvms_mj.analysis.plots import plot_run
+    from uvms_mj.analysis.plots import plot_run, plot_run_paths
 
     out_dir = out_dir or out_dir_old
     folder = _check_dir(Path(out_dir) if out_dir else Path(log).parent)
+    for p in plot_run_paths(folder, Path(log).stem):
+        _check_out(p, protect=(log,), kind="plot", option="--out-dir")
     run_log = _read(log)
     try:
         folder.mkdir(parents=True, exist_ok=True)
@@ -121,13 +123,20 @@ def export(log: str, fmt: str, layout: str, out: str | None, columns: str) -> No
     unknown, or with --columns index); a matrix x[i,j] (row-major); booleans 0/1; NaN empty
     in CSV. npz and mat keep the logged shapes and add meta_json (metadata and status) and
     columns_json (the component names). See uvms_mj.io.export."""
-    from uvms_mj.io.export import ExportError, export_log
+    from uvms_mj.io.export import OUTPUT_KIND, ExportError, export_log, export_paths
 
+    targets = export_paths(fmt, out, layout, log)
+    if layout == "channels" and fmt in ("csv", "parquet"):
+        _check_dir(targets[0].parent, option="-o/--out")
+    for p in targets:
+        _check_out(p, protect=(log,), kind=OUTPUT_KIND[fmt], option="-o/--out")
     run_log = _read(log)
     try:
         paths = export_log(run_log, fmt, out, layout=layout, log_path=log, columns=columns)
     except ExportError as exc:
         click.echo(f"error: {exc}", err=True)
         sys.exit(2)
+    except OSError as exc:
+        _io_error(getattr(exc, "filename", None) or out or log, exc)
     for p in paths:
         click.echo(f"{fmt}: {p}")

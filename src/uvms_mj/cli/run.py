@@ -15,14 +15,16 @@ from uvms_mj.io.interrupts import partial_output
 from uvms_mj.plant.params import ParameterError
 
 
-def _run_one(scenario, out: Path, progress: bool = True, source: str | None = None, live=None):
+def _run_one(scenario, out: Path, progress: bool = True, source: str | None = None, live=None,
+             option: str = "--out"):
     """Run one scenario into an MCAP log (and to ``live``, a LiveServer, when given); returns
-    (result, log path, metrics)."""
+    (result, log path, metrics). A log that could not be written whole (a full disk, an I/O
+    error) is removed: exit EXIT_IO."""
     from uvms_mj.sim.experiment import metrics
     from uvms_mj.io.recorder import LogInUseError, McapRecorder, handle_sigterm
     from uvms_mj.scenario.schema import ScenarioError, build, resolved, run_scenario
 
-    _check_out(out, protect=(source,))
+    _check_out(out, protect=(source,), option=option)
     try:
         plant, ctrl = build(scenario)
     except (ScenarioError, ParameterError, ValueError) as exc:
@@ -35,10 +37,12 @@ def _run_one(scenario, out: Path, progress: bool = True, source: str | None = No
 
         meta["robot"] = robot_info(scenario, plant)
         rec_kw["model"] = getattr(plant, "robot_model", plant.model)  # without a tether's chain: q_true fits it
+    opened = False
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
         with _progress(f"{scenario.name} [{scenario.controller.name}]", "sample") as tick, handle_sigterm(), \
                 McapRecorder(out, plant.params, meta, **rec_kw) as rec:
+            opened = True
             try:
                 res = run_scenario(scenario, sink=rec.write_sample, on_sample=tick if progress else None,
                                    built=(plant, ctrl), nav_sink=rec.write_navigation)
@@ -57,6 +61,8 @@ def _run_one(scenario, out: Path, progress: bool = True, source: str | None = No
     except LogInUseError as exc:
         raise click.UsageError(str(exc)) from None
     except OSError as exc:
+        if opened:  # ours, cut short: not left under the log's name
+            out.unlink(missing_ok=True)
         _io_error(out, exc)
     return res, out, metrics(res)
 
@@ -77,11 +83,13 @@ def _live_server(port: int, pace: str, wait: float):
     return server
 
 
-def _plots(log_path: Path, echo=click.echo, data=None) -> None:
+def _plots(log_path: Path, echo=click.echo, data=None, protect: tuple = ()) -> None:
     """The plots of a run's log (``data``: the run itself, which holds the log's signals, else the
     log is read); a run too short (or too broken) to plot gets a warning."""
-    from uvms_mj.analysis.plots import plot_run
+    from uvms_mj.analysis.plots import plot_run, plot_run_paths
 
+    for p in plot_run_paths(log_path.parent, log_path.stem):
+        _check_out(p, protect=protect, kind="plot", option="--plots")
     try:
         paths = plot_run(data if data is not None else _read(log_path), log_path.parent, stem=log_path.stem)
     except OSError as exc:
@@ -101,12 +109,12 @@ def _default_log(scenario, out: str | None, controller: str) -> Path:
     return Path("logs") / f"{scenario.name}-{controller}.mcap"
 
 
-def _video(log_path: Path, video_path: Path, scenario=None, echo=click.echo) -> None:
+def _video(log_path: Path, video_path: Path, scenario=None, echo=click.echo, protect: tuple = ()) -> None:
     log = _read(log_path)
     kw = {}
     if scenario is not None:
         kw = {"fps": scenario.outputs.video_fps, "size": tuple(scenario.outputs.video_size)}
-    _check_out(video_path, kind="video", magic=None)
+    _check_out(video_path, protect=(log_path, *protect), kind="video", option="--video")
     info = _render(log, video_path, log_path, **kw)
     echo(f"video: {video_path} ({info['frames']} frames)")
 
@@ -155,8 +163,17 @@ def run_cmd(scenario: str, sets: tuple[str, ...], out: str | None, video: bool |
         raise click.UsageError("--pace needs --live (a run without it goes as fast as it can)")
     sc = _load(scenario, sets)
     log = _default_log(sc, out, sc.controller.name)
+    # Every output checked before the run: none may be an input or a file that is not its kind.
+    _check_out(log, protect=(scenario,), option="--out")
     if video if video is not None else sc.outputs.video:
-        _check_out(log.with_suffix(".mp4"), kind="video", magic=None)
+        _check_out(log.with_suffix(".mp4"), protect=(scenario, log), kind="video", option="--video")
+    if json_out and json_out != "-":
+        _check_out(json_out, protect=(scenario, log), kind="JSON file", option="--json")
+    if plots if plots is not None else sc.outputs.plots:
+        from uvms_mj.analysis.plots import plot_run_paths
+
+        for p in plot_run_paths(log.parent, log.stem):
+            _check_out(p, protect=(scenario, log, json_out), kind="plot", option="--plots")
     server = _live_server(live_port, pace or "realtime", live_wait) if live else None
     try:
         res, log, m = _run_one(sc, log, source=scenario, live=server)
@@ -170,10 +187,11 @@ def run_cmd(scenario: str, sets: tuple[str, ...], out: str | None, video: bool |
         _write_json(_json_metrics({sc.controller.name: {"status": status, "reason": reason, "log": str(log),
                                                         "metrics": m}}, sc.name), json_out)
     if plots if plots is not None else sc.outputs.plots:
-        _plots(log, echo, data=res)  # the run's arrays are the log's, bit for bit: not read back (memory, time)
+        # the run's arrays are the log's, bit for bit: not read back (memory, time)
+        _plots(log, echo, data=res, protect=(scenario, json_out))
     del res  # the video reads the log
     if video if video is not None else sc.outputs.video:
-        _video(log, log.with_suffix(".mp4"), sc, echo=echo)
+        _video(log, log.with_suffix(".mp4"), sc, echo=echo, protect=(scenario, json_out))
     if status != "ok":
         click.echo(f"{'error' if status != 'joint_limit' else 'warning'}: {reason}", err=True)
         sys.exit(exit_code([status]))
@@ -212,10 +230,19 @@ def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str
     # Every controller's scenario is checked before any runs (its own parameters: the
     # scenario's controllers.<name>, or controller.params for the file's controller, or defaults).
     scs = {name: _load(scenario, tuple(sets) + (f"controller.name={name}",)) for name in names}
+    figure = Path(out_dir) / f"{base.name}-compare.png"
+    paths = [Path(out_dir) / f"{scs[n].name}-{n}.mcap" for n in names]
+    for p in paths:
+        _check_out(p, protect=(scenario,), option="--out-dir")
+        if video:
+            _check_out(p.with_suffix(".mp4"), protect=(scenario,), kind="video", option="--video")
+    if json_out and json_out != "-":
+        _check_out(json_out, protect=(scenario, *paths), kind="JSON file", option="--json")
+    _check_out(figure, protect=(scenario, json_out, *paths), kind="plot", option="--out-dir")
     for name in names:
         sc = scs[name]
         path = Path(out_dir) / f"{sc.name}-{name}.mcap"
-        res, path, m = _run_one(sc, path, source=scenario)
+        res, path, m = _run_one(sc, path, source=scenario, option="--out-dir")
         results[name], logs[name], status[name] = m, path, res.status
         runs[name] = {"status": res.status, "reason": res.reason, "log": str(path), "metrics": m}
         if res.status != "ok":
@@ -223,15 +250,15 @@ def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str
         del res  # its arrays (the figure reads the logs)
         echo(f"log: {path}")
         if video:
-            _video(path, path.with_suffix(".mp4"), sc, echo=echo)
+            _video(path, path.with_suffix(".mp4"), sc, echo=echo, protect=(scenario, json_out))
     echo(metrics_table(results, status))
     if json_out:
         _write_json(_json_metrics(runs, base.name), json_out)
     try:
-        fig = plot_comparison({n: _read(p) for n, p in logs.items()}, Path(out_dir) / f"{base.name}-compare.png")
+        fig = plot_comparison({n: _read(p) for n, p in logs.items()}, figure)
         echo(f"figure: {fig}")
     except OSError as exc:
-        _io_error(Path(out_dir) / f"{base.name}-compare.png", exc)
+        _io_error(figure, exc)
     except (ValueError, KeyError, IndexError, TypeError) as exc:
         click.echo(f"warning: no comparison figure: {exc}", err=True)
     if failed:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import click
 
-from uvms_mj.cli.common import _check_dir, _io_error, _json_dest, _write_json
+from uvms_mj.cli.common import _check_dir, _check_out, _io_error, _json_dest, _write_json
 
 _JSON_HELP = "Also write the results as JSON: '-' for stdout (the table then goes to stderr), or a file path."
 
@@ -97,6 +97,13 @@ def _load(data_dir: str, model: str, overrides: str | None, names, neutral: bool
     if not len(ts):
         raise click.UsageError(f"no usable trial in {folder}" + (f" (skipped: {', '.join(ts.skipped)})" if ts.skipped else ""))
     return m, over, ts
+
+
+def _inputs(data_dir: str | None, overrides: str | None) -> tuple:
+    """The files a command reads (never overwritten): the trial folder's files and the overrides file."""
+    folder = _trial_dir(data_dir)
+    files = [p for p in sorted(folder.iterdir()) if p.is_file()] if folder.is_dir() else []
+    return (*files, overrides)
 
 
 def _issues_json(ts) -> dict:
@@ -205,10 +212,16 @@ def sim2real(data_dir, trial_names, model, overrides, json_out, plots_dir, dt, a
 
     echo = _json_dest(json_out == "-")
     cfg = _cfg(dt, not as_is)
+    inputs = _inputs(data_dir, overrides)
+    if json_out and json_out != "-":
+        _check_out(json_out, protect=inputs, kind="JSON file", option="--json")
     plots = None
     if plots_dir is not None:
-        plots = _check_dir(plots_dir)
+        plots = _check_dir(plots_dir, option="--plots")
     m, over, ts = _load(data_dir, model, overrides, _names(trial_names), cfg.neutral, echo)
+    if plots is not None:
+        for n in ts.trials:
+            _check_out(plots / f"sim2real_{n}.png", protect=(*inputs, json_out), kind="plot", option="--plots")
     static = _static(m, ts, echo)
     try:
         res = run_trials(list(ts), model, over, cfg, jobs)
@@ -294,6 +307,14 @@ def identify_cmd(data_dir, fit_names, score_names, cv, trial_names, param_names,
     parent = Path(out).resolve().parent
     if not parent.is_dir() or not os.access(parent, os.W_OK) or Path(out).is_dir():
         raise click.UsageError(f"-o/--out: cannot write {out} (its folder does not exist or is not writable)")
+    inputs = _inputs(data_dir, overrides)
+    outp = Path(out)
+    dests = [outp] if cv is None else [outp.with_name(f"{outp.stem}.fold{k}{outp.suffix or '.yaml'}")
+                                       for k in range(1, min(max(cv, 1), 1000) + 1)]
+    for dest in dests:
+        _check_out(dest, protect=inputs, kind="override file", option="-o/--out")
+    if json_out and json_out != "-":
+        _check_out(json_out, protect=(*inputs, *dests), kind="JSON file", option="--json")
     fit = _names(fit_names) or []
     score = _names(score_names)
     wanted = _names(trial_names) if cv is not None else (fit + score if score else None)
@@ -318,7 +339,6 @@ def identify_cmd(data_dir, fit_names, score_names, cv, trial_names, param_names,
         plan = [([n for j, p in enumerate(parts) if j != i for n in p], part) for i, part in enumerate(parts)]
     say = None if quiet else (lambda s: click.echo(s, err=True))
     results, written = [], []
-    outp = Path(out)
     for k, (f, s) in enumerate(plan, 1):
         echo(f"fit on {', '.join(f)}; score on {', '.join(s) or '(none)'}")
         try:

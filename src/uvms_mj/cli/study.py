@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from uvms_mj.cli.common import EXIT_INTERRUPTED, SCENARIO, _check_dir, _io_error
+from uvms_mj.cli.common import EXIT_INTERRUPTED, SCENARIO, _check_dir, _check_out, _io_error
 
 
 @click.command()
@@ -80,6 +80,10 @@ def sweep(scenario: str, varies: tuple[str, ...], n: int | None, workers: int | 
         raise click.UsageError(str(exc)) from None
     out_dir = out_dir or out_dir_old
     out = _check_dir(Path(out_dir) if out_dir else Path("logs") / f"{plan.name}-sweep")
+    from uvms_mj.analysis.sweep.runner import _OUR_FILES
+
+    for name in _OUR_FILES:  # the scenario file is never one of the sweep's outputs
+        _check_out(out / name, protect=(scenario,), kind="sweep output", option="--out-dir")
     n_samples = len(plan.samples)
     click.echo(f"sweep: {len(plan.runs)} runs ({n_samples} samples x {len(plan.controllers)} controllers: "
                f"{', '.join(plan.controllers)}) -> {out}")

@@ -45,14 +45,18 @@ from typing import Any
 
 import numpy as np
 
+from uvms_mj.io.atomic import atomic_open, atomic_path
 from uvms_mj.io.interrupts import partial_output
 
-__all__ = ["COLUMNS", "FORMATS", "LAYOUTS", "ExportError", "export_log", "tables", "to_dataframe"]
+__all__ = ["COLUMNS", "FORMATS", "LAYOUTS", "OUTPUT_KIND", "ExportError", "export_log", "export_paths", "tables",
+           "to_dataframe"]
 
 FORMATS = ("csv", "parquet", "npz", "mat")
 LAYOUTS = ("wide", "channels")
 #: Column naming: by the robot's layout (index where unknown), or by index everywhere.
 COLUMNS = ("named", "index")
+#: The kind of output file (:data:`uvms_mj.io.paths.OUTPUT_KINDS`) of each format.
+OUTPUT_KIND = {"csv": "CSV table", "parquet": "Parquet file", "npz": "npz file", "mat": "mat file"}
 #: Table names of the sample channels.
 CHANNEL_TABLES = {"/state/true": "state_true", "/control": "control"}
 
@@ -158,7 +162,7 @@ def _require(module: str, fmt: str):
 def _write_csv(cols: dict[str, np.ndarray], path: Path) -> None:
     names = list(cols)
     data = np.column_stack([np.asarray(c, dtype=float) for c in cols.values()])
-    with open(path, "w", encoding="utf-8", newline="") as f:
+    with atomic_open(path, "w", encoding="utf-8", newline="") as f:
         f.write(",".join(f'"{n}"' if "," in n else n for n in names) + "\n")
         for row in data:
             f.write(",".join("" if np.isnan(v) else repr(float(v)) for v in row) + "\n")
@@ -169,12 +173,24 @@ def _write_parquet(cols: dict[str, np.ndarray], path: Path, meta: str, names: st
     pq = _require("pyarrow.parquet", "parquet")
     table = pa.table({k: np.asarray(v) for k, v in cols.items()})
     table = table.replace_schema_metadata({"uvms_mj": meta, "uvms_mj_columns": names})
-    pq.write_table(table, str(path))
+    with atomic_path(path) as tmp:
+        pq.write_table(table, str(tmp))
 
 
 def _mat_name(name: str) -> str:
     n = re.sub(r"[^A-Za-z0-9_]", "_", name)
     return n if re.match(r"[A-Za-z]", n) else "x_" + n
+
+
+def export_paths(fmt: str, out: str | Path | None = None, layout: str = "wide",
+                 log_path: str | Path | None = None) -> list[Path]:
+    """The files :func:`export_log` may write (to check them before reading the log): one file,
+    or for channels csv/parquet one per sample channel in the folder."""
+    stem = Path(log_path) if log_path is not None else Path("log.mcap")
+    if fmt in ("npz", "mat") or layout == "wide":
+        return [Path(out) if out else stem.with_suffix(f".{fmt}")]
+    folder = Path(out) if out else stem.with_name(stem.stem + "-export")
+    return [folder / f"{name}.{fmt}" for name in CHANNEL_TABLES.values()]
 
 
 def export_log(log, fmt: str, out: str | Path | None = None, layout: str = "wide",
@@ -211,7 +227,7 @@ def export_log(log, fmt: str, out: str | Path | None = None, layout: str = "wide
                 for table, names in groups.items():
                     arrays[f"{table}/t"] = t
                     arrays.update({f"{table}/{n}": np.asarray(log.signals[n]) for n in names})
-            with partial_output(path), open(path, "wb") as f:
+            with atomic_open(path, "wb") as f:
                 np.savez_compressed(f, **arrays)
         else:
             sio = _require("scipy.io", fmt)
@@ -222,8 +238,8 @@ def export_log(log, fmt: str, out: str | Path | None = None, layout: str = "wide
             else:
                 for table, names in groups.items():
                     mdict[table] = {"t": t, **{_mat_name(n): np.asarray(log.signals[n]) for n in names}}
-            with partial_output(path):
-                sio.savemat(str(path), mdict, do_compression=True, oned_as="column")
+            with atomic_path(path) as tmp:
+                sio.savemat(str(tmp), mdict, appendmat=False, do_compression=True, oned_as="column")
         return [path]
     tabs = tables(log, layout, columns)
     if layout == "wide":

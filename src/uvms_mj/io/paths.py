@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Callable, Union
 
 
 class OutputPathError(ValueError):
@@ -17,17 +18,48 @@ class LogInUseError(OSError):
 
 _NO_WRITE_ROOTS = ("/proc", "/sys", "/dev")
 
+Magic = Union[bytes, Callable[[bytes], bool], None]
+
+#: How each kind of uvms-mj output begins (a prefix, or a test of the file's first 64 bytes): an
+#: existing file that does not is not one of ours and is never overwritten. Kinds not listed
+#: are not checked by content (only ``protect`` and the file type apply).
+OUTPUT_KINDS: dict[str, Magic] = {
+    "log": b"\x89MCAP",                                 # MCAP magic
+    "video": lambda head: head[4:8] == b"ftyp",          # ISO base media (MP4): the ftyp box first
+    "plot": b"\x89PNG\r\n\x1a\n",                     # PNG signature
+    "JSON file": lambda head: head.lstrip()[:1] in (b"{", b"["),
+    "CSV table": lambda head: head.startswith((b"t,", b"t\n", b"t\r\n")),  # export's tables: t [s] first
+    "npz file": b"PK\x03\x04",                          # a zip archive
+    "mat file": b"MATLAB",                               # MATLAB 5 header text
+    "Parquet file": b"PAR1",
+    "override file": b"# uvms-mj identify",              # identify's header comment
+}
+
+_BY_KIND = object()
+
+
+def _matches(magic: Magic, head: bytes) -> bool:
+    if callable(magic):
+        return magic(head)
+    return head[: len(magic)] == magic[: len(head)]  # a prefix of the magic: one of ours cut short (a killed run)
+
 
 def check_output_path(path: str | os.PathLike, protect: tuple = (), kind: str = "log",
-                      magic: bytes | None = b"\x89MCAP") -> Path:
+                      magic=_BY_KIND) -> Path:
     """Refuse an output path that would fail or destroy something, before anything is written.
 
     Refused: a path under /proc, /sys or /dev (except /dev/shm); a symbolic link; an existing directory, device
-    or other non-regular file; an existing non-empty file that does not start with ``magic``
-    (not one of our outputs: never overwritten); a file in ``protect`` (e.g. the scenario
-    file); a parent that is a file or is not writable; a name longer than the file system
-    allows. Raises :class:`OutputPathError`; returns the path.
+    or other non-regular file; a file in ``protect`` (the command's inputs: the scenario file,
+    the log being exported, a trial's files, an overrides file; compared with
+    :func:`os.path.samefile`, so another name or a hard link of an input is refused too); an
+    existing non-empty file that does not look like ``kind`` (``magic``: a prefix or a test of the
+    first 64 bytes, by default :data:`OUTPUT_KINDS` [kind]; None: no content check), i.e. not one
+    of our outputs: never overwritten; a parent that is a file or is not writable; a name longer
+    than the file system allows. Raises :class:`OutputPathError` (its message names the path and
+    why); returns the path.
     """
+    if magic is _BY_KIND:
+        magic = OUTPUT_KINDS.get(kind)
     p = Path(path)
     absolute = Path(os.path.abspath(p))
     for root in _NO_WRITE_ROOTS:
@@ -39,6 +71,10 @@ def check_output_path(path: str | os.PathLike, protect: tuple = (), kind: str = 
         if len(os.fsencode(part)) > 255:
             raise OutputPathError(f"{p}: a file name is {len(os.fsencode(part))} bytes long; "
                                   "the file system allows 255")
+    for other in protect:  # not there yet: the same path by name (symbolic links resolved)
+        if other is not None and not p.exists() and os.path.realpath(p) == os.path.realpath(other):
+            raise OutputPathError(f"{p}: is also {other}, another input or output of this command; "
+                                  "choose another output path")
     if p.is_symlink():
         raise OutputPathError(f"{p}: is a symbolic link; give the path of a regular file (the link's target "
                               "is not overwritten)")
@@ -47,17 +83,18 @@ def check_output_path(path: str | os.PathLike, protect: tuple = (), kind: str = 
             raise OutputPathError(f"{p}: exists and is not a regular file")
         for other in protect:
             try:
-                if other is not None and os.path.samefile(p, other):
-                    raise OutputPathError(f"{p}: is the input file {other}; choose another output path")
+                same = other is not None and os.path.samefile(p, other)
             except OSError:
-                pass
+                same = False
+            if same:
+                raise OutputPathError(f"{p}: is the input file {other}; choose another output path")
         if magic is not None:
             try:
                 with open(p, "rb") as f:
-                    head = f.read(len(magic))
+                    head = f.read(64)
             except OSError as exc:
                 raise OutputPathError(f"{p}: cannot be read back ({exc.strerror or exc})") from None
-            if head and head != magic[: len(head)]:
+            if head and not _matches(magic, head):
                 raise OutputPathError(f"{p}: exists and is not a {kind} written by uvms-mj; not overwriting it "
                                       "(delete it or choose another path)")
         if not os.access(p, os.W_OK):

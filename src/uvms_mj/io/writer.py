@@ -3,6 +3,8 @@ described in :mod:`uvms_mj.io.recorder`)."""
 
 from __future__ import annotations
 
+import contextlib
+
 import dataclasses
 import datetime as _dt
 import json
@@ -120,6 +122,8 @@ class McapRecorder(NavigationChannels):
             self._writer.flush()
         except BaseException:
             self._file.close()
+            with contextlib.suppress(OSError):  # a header cut short (full disk...): no half-written log left
+                self.path.unlink()
             raise
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, int] = {}

@@ -31,7 +31,12 @@ import numpy as np
 from uvms_mj.analysis.plots.paper import _plot_paper_comparison, _plot_paper_run, tracking_errors
 from uvms_mj.analysis.plots.robot import _plot_robot_comparison, _plot_robot_run, _robot, attitude_error, robot_errors
 
-__all__ = ["attitude_error", "plot_run", "plot_comparison", "robot_errors", "tracking_errors"]
+__all__ = ["attitude_error", "plot_run", "plot_run_paths", "plot_comparison", "robot_errors", "tracking_errors"]
+
+
+def plot_run_paths(out_dir: str | Path, stem: str = "run") -> list[Path]:
+    """The files :func:`plot_run` writes (to check them before drawing anything)."""
+    return [Path(out_dir) / f"{stem}_{suffix}.png" for suffix in ("tracking", "actuation")]
 
 
 def plot_run(log, out_dir: str | Path, stem: str = "run") -> list[Path]:

@@ -8,12 +8,13 @@ from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
+
+from uvms_mj.io.atomic import atomic_path
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from uvms_mj.analysis.plots.common import (_DPI, _XY, _dig, _finish, _g, _headroom, _label, _meta, _missing,
                                            _new_figure, _rms, _shade, _shade_phases, _sig)
-from uvms_mj.io.interrupts import partial_output
 
 _THR = ("#1f77b4", "#ff7f0e", "#2ca02c")
 
@@ -307,8 +308,8 @@ def _plot_paper_run(log, out: Path, stem: str) -> list[Path]:
                                 ("actuation", _actuation_figure, "actuation and singularity handling")):
         fig = build(log, f"{name}: {what}")
         path = out / f"{stem}_{suffix}.png"
-        with partial_output(path):  # an interrupted write leaves no half a PNG
-            fig.savefig(path, dpi=_DPI)
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=_DPI, format="png")
         paths.append(path)
     return paths
 
@@ -359,6 +360,6 @@ def _plot_paper_comparison(logs: Mapping[str, Any], out_path: Path) -> Path:
         if t_hi > t_lo:
             a.set_xlim(t_lo, t_hi)
     ax[2].set_xlabel("time t [s]")
-    with partial_output(out_path):
-        fig.savefig(out_path, dpi=_DPI)
+    with atomic_path(out_path) as tmp:
+        fig.savefig(tmp, dpi=_DPI, format="png")
     return out_path

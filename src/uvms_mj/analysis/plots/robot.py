@@ -8,11 +8,12 @@ from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
+
+from uvms_mj.io.atomic import atomic_path
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from uvms_mj.analysis.plots.common import _DPI, _finish, _g, _headroom, _label, _missing, _new_figure, _rms, _sig
-from uvms_mj.io.interrupts import partial_output
 
 # The vehicle's free joint comes first in qpos (x, y, z [m] world, qw, qx, qy, qz) and the arm
 # joints follow (one angle each), as in every built-in robot (uvms_mj.plant.robot); velocities:
@@ -263,8 +264,8 @@ def _plot_robot_run(log, robot: Mapping[str, Any], out: Path, stem: str) -> list
                                 ("actuation", _robot_actuation_figure, f"{robot.get('name')} actuation")):
         fig = build(log, robot, f"{name}: {what}")
         path = out / f"{stem}_{suffix}.png"
-        with partial_output(path):  # an interrupted write leaves no half a PNG
-            fig.savefig(path, dpi=_DPI)
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=_DPI, format="png")
         paths.append(path)
     return paths
 
@@ -315,6 +316,6 @@ def _plot_robot_comparison(logs: Mapping[str, Any], out_path: Path) -> Path:
         if t_hi > t_lo:
             a.set_xlim(t_lo, t_hi)
     ax[2].set_xlabel("time t [s]")
-    with partial_output(out_path):
-        fig.savefig(out_path, dpi=_DPI)
+    with atomic_path(out_path) as tmp:
+        fig.savefig(tmp, dpi=_DPI, format="png")
     return out_path

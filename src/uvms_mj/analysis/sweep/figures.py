@@ -11,10 +11,10 @@ from pathlib import Path
 
 import numpy as np
 
+from uvms_mj.io.atomic import atomic_path
 from uvms_mj.analysis.sweep.plan import _jsonable
 from uvms_mj.analysis.sweep.spec import _is_num
 from uvms_mj.analysis.sweep.summary import SUMMARY_METRICS, _pairs
-from uvms_mj.io.interrupts import partial_output
 
 
 _COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b")
@@ -165,8 +165,8 @@ def plot_sweep(rows: Sequence[dict], columns: Sequence[str], controllers: Sequen
                  fontsize=10)
     fig.legend(loc="outside lower center", ncol=2 * len(controllers), fontsize=8)
     p = out / "sweep_metrics.png"
-    with partial_output(p):
-        fig.savefig(p)
+    with atomic_path(p) as tmp:
+        fig.savefig(tmp, format="png")
     paths.append(p)
 
     if len(controllers) >= 2:
@@ -228,7 +228,7 @@ def plot_sweep(rows: Sequence[dict], columns: Sequence[str], controllers: Sequen
         if any(ax.get_legend_handles_labels()[0] for ax in axs.flat):
             fig.legend(loc="outside lower center", ncol=len(controllers), fontsize=8)
         p = out / "sweep_ratio.png"
-        with partial_output(p):
-            fig.savefig(p)
+        with atomic_path(p) as tmp:
+            fig.savefig(tmp, format="png")
         paths.append(p)
     return paths

@@ -12,13 +12,13 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from uvms_mj.io.atomic import atomic_open
 from uvms_mj.analysis.sweep.engines import _ENGINES, check_engine
 from uvms_mj.analysis.sweep.figures import plot_sweep
 from uvms_mj.analysis.sweep.plan import SweepPlan, _jsonable
 from uvms_mj.analysis.sweep.spec import SweepError
 from uvms_mj.analysis.sweep.summary import summarize
 from uvms_mj.analysis.sweep.table import _row, _write_table
-from uvms_mj.io.interrupts import partial_output
 
 #: The statuses of a finished run (not retried on resume; ``crashed`` is).
 FINISHED = ("ok", "diverged", "error", "joint_limit")
@@ -103,11 +103,10 @@ def prepare_out(plan: SweepPlan, out_dir: str | Path, fresh: bool = False) -> di
     if not spec.exists():
         from uvms_mj import __version__
 
-        with partial_output(spec):
-            spec.write_text(json.dumps({"definition": plan.definition, "source": plan.scenario_path,
-                                        "sets": list(plan.sets), "uvms_mj": __version__,
-                                        "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())},
-                                       indent=1), encoding="utf-8")
+        with atomic_open(spec, "w", encoding="utf-8") as f:
+            f.write(json.dumps({"definition": plan.definition, "source": plan.scenario_path,
+                                "sets": list(plan.sets), "uvms_mj": __version__,
+                                "created_utc": time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())}, indent=1))
     wanted = {r.key for r in plan.runs}
     finished = {}
     for row in _read_jsonl(out / "runs.jsonl"):
@@ -180,9 +179,8 @@ def run_sweep(
         summary = summarize(rows, plan.controllers, [a.column for a in plan.axes])
         summary.update(planned=len(plan.runs), skipped=len(finished), ran=k, elapsed_s=elapsed,
                        runs_per_s=(k / elapsed if k and elapsed > 0 else None), workers=workers, engine=engine)
-        with partial_output(out / "summary.json"):
-            (out / "summary.json").write_text(json.dumps(_jsonable(summary), indent=1, allow_nan=True),
-                                              encoding="utf-8")
+        with atomic_open(out / "summary.json", "w", encoding="utf-8") as f:
+            f.write(json.dumps(_jsonable(summary), indent=1, allow_nan=True))
         figs = []
         if figures and not interrupted and rows:
             discrete = [a.column for a in plan.axes if a.kind == "grid" or a.spec.dist == "choice"]

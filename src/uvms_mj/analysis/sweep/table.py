@@ -5,15 +5,14 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 import re
 from collections.abc import Iterable
 from pathlib import Path
 from typing import Any
 
+from uvms_mj.io.atomic import atomic_open, atomic_path
 from uvms_mj.analysis.sweep.plan import Run, SweepPlan, _jsonable
 from uvms_mj.analysis.sweep.spec import _is_num
-from uvms_mj.io.interrupts import partial_output
 
 #: The metrics of :func:`uvms_mj.sim.experiment.metrics`, in table order (others found are appended).
 METRICS = ("base_pos_rms_mm", "base_pos_max_mm", "base_att_rms_mrad", "base_att_max_mrad", "tip_rms_mm",
@@ -58,13 +57,11 @@ def _write_table(plan: SweepPlan, rows: list[dict], out: Path, parquet: bool = T
     results.parquet is removed (results.csv has every finished run; the resumed sweep writes both)."""
     cols = _columns(plan, rows)
     paths = []
-    tmp = out / "results.csv.tmp"
-    with partial_output(tmp), open(tmp, "w", newline="", encoding="utf-8") as f:
+    with atomic_open(out / "results.csv", "w", newline="", encoding="utf-8") as f:
         w = csv.writer(f)
         w.writerow(cols)
         for r in rows:
             w.writerow([_cell(r.get(c, "")) for c in cols])
-    os.replace(tmp, out / "results.csv")
     paths.append(out / "results.csv")
     if not parquet:
         (out / "results.parquet").unlink(missing_ok=True)
@@ -79,8 +76,8 @@ def _write_table(plan: SweepPlan, rows: list[dict], out: Path, parquet: bool = T
     for c in [a.column for a in plan.axes]:
         if any(not _is_num(v) for v in data[c]):
             data[c] = [json.dumps(_jsonable(v)) for v in data[c]]
-    with partial_output(out / "results.parquet"):
-        pq.write_table(pa.table(data), out / "results.parquet")
+    with atomic_path(out / "results.parquet") as tmp:
+        pq.write_table(pa.table(data), str(tmp))
     paths.append(out / "results.parquet")
     return paths
 
