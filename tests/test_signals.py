@@ -255,7 +255,8 @@ def test_render_mid_video(sig, long_log, tmp_path):
     short is not the requested output)."""
     mp4 = tmp_path / "v.mp4"
     p = _start(tmp_path, "render", str(long_log), "-o", str(mp4))
-    _wait_for(lambda: mp4.exists(), p)
+    # ffmpeg writes a temporary next to it (uvms_mj.io.atomic), renamed to v.mp4 only when complete
+    _wait_for(lambda: any(tmp_path.glob(".v.*.part.mp4")) or mp4.exists(), p)
     if p.poll() is not None and p.returncode == 4:
         pytest.skip("rendering unavailable here")
     running, err = _signal(p, sig, tmp_path)
