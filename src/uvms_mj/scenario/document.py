@@ -52,7 +52,7 @@ A null default is the robot's own, filled in when the scenario is validated (``u
     initial: {}                 # pose, joints by name, velocities (null: the model's keyframe)
     sensors: {}                 # flat fields, or per signal: position / attitude / joints / velocity
     navigation: null            # {imu, dvl, depth, fix}: navigation sensors on sites (MJCF robots;
-                                #   uvms_mj.scenario.navigation); fed to the controller only with controller.feedback: estimate
+                                #   uvms_mj.scenario.navigation); to the controller with controller.feedback: estimate
     vehicle:                    # the vehicle's setpoint or trajectory (controller's base reference)
       setpoint: null
       trajectory: null

@@ -198,7 +198,8 @@ def _estimated(est, meas: Measurement, layout, q_true: np.ndarray, t: float) -> 
         qd[d:d + 3] = e.velocity
         qd[d + 3:d + 6] = e.angular_velocity
     R_err = quat_to_mat(q[a + 3:a + 7]).T @ quat_to_mat(q_true[a + 3:a + 7])
-    row = {"nav_estimate": np.r_[e.position, q[a + 3:a + 7]], "nav_sigma_pos": e.sigma[0:3], "nav_sigma_att": e.sigma[6:9],
+    row = {"nav_estimate": np.r_[e.position, q[a + 3:a + 7]], "nav_sigma_pos": e.sigma[0:3],
+           "nav_sigma_att": e.sigma[6:9],
            "nav_error_pos": q_true[a:a + 3] - e.position, "nav_error_att": rotation_log(R_err)}
     return Measurement(k=meas.k, t=meas.t, q=q, qd=qd), row
 
@@ -236,7 +237,8 @@ def run_closed_loop(
             the navigation samples as they arrive (:class:`uvms_mj.estimation.online.OnlineEstimator`) and the
             controller's vehicle pose (and velocity, with a velocity sensor) is its estimate at the sample;
             the joints stay ``sensor``'s. Logs ``nav_estimate`` (position world, quat w x y z),
-            ``nav_sigma_pos`` [m], ``nav_sigma_att`` [rad] (body), ``nav_error_pos`` (true - estimate, world [m]) and ``nav_error_att``
+            ``nav_sigma_pos`` [m], ``nav_sigma_att`` [rad] (body), ``nav_error_pos`` (true - estimate,
+            world [m]) and ``nav_error_att``
             (the rotation vector of R_est^T R_true, body [rad]).
     """
     if feedback not in ("truth", "estimate"):
