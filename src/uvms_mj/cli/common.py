@@ -32,9 +32,11 @@ METRIC_LABELS = {
     "joint_rms_mrad": "arm joints RMS [mrad]",
     "joint_limit_excursion_deg": "joint limit excursion [deg]",
     "singular_s": "Eq. 12 singular phase [s]",
+    "nav_pos_rms_mm": "estimate position RMS [mm]",
+    "nav_att_rms_mrad": "estimate attitude RMS [mrad]",
 }
 #: Rows shown only when some run has a value (floating-robot metrics; controllers with Eq. 12).
-_OPTIONAL_ROWS = ("joint_rms_mrad", "singular_s")
+_OPTIONAL_ROWS = ("joint_rms_mrad", "singular_s", "nav_pos_rms_mm", "nav_att_rms_mrad")
 
 
 def metrics_table(results: dict[str, dict[str, float]], status: dict[str, str] | None = None) -> str:

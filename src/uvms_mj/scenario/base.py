@@ -235,6 +235,10 @@ class ControllerSection(_Section):
         "measured", description="the base's reference pose: the first (noisy) measurement, the plant's true "
         "initial pose, or the model file's initial pose (its initial keyframe, the paper's paper_initial; else "
         "qpos0)")
+    feedback: Literal["truth", "estimate"] = Field(
+        "truth", description="the vehicle pose the controller gets: truth (the true state through the sensors "
+        "section) or estimate (the ESKF on the navigation section's samples as they arrive, "
+        "uvms_mj.estimation.online; needs navigation.imu and navigation.fix or navigation.depth)")
 
 
 class SignalSection(_Section):

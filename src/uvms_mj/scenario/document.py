@@ -52,7 +52,7 @@ A null default is the robot's own, filled in when the scenario is validated (``u
     initial: {}                 # pose, joints by name, velocities (null: the model's keyframe)
     sensors: {}                 # flat fields, or per signal: position / attitude / joints / velocity
     navigation: null            # {imu, dvl, depth, fix}: navigation sensors on sites (MJCF robots;
-                                #   uvms_mj.scenario.navigation); logged, not fed to the controller
+                                #   uvms_mj.scenario.navigation); to the controller with controller.feedback: estimate
     vehicle:                    # the vehicle's setpoint or trajectory (controller's base reference)
       setpoint: null
       trajectory: null
@@ -66,6 +66,8 @@ A null default is the robot's own, filled in when the scenario is validated (``u
       name: null                # null: rac_dob on the paper's robot (the paper's method), station_pid on others
       params: {}                # keyword arguments of the controller (params.T: the period)
       base_reference: measured  # measured | truth | nominal
+      feedback: truth           # truth (the sensors section's measured truth) | estimate (the ESKF on the
+                                #   navigation section's samples, online; needs navigation.imu and a fix or depth)
     controllers: {}             # name -> params, for compare / --set controller.name=...
     warm_start: true            # thrusters start at the first command (holding station)
     outputs: {log: null, video: false, video_fps: 30, video_size: [640, 480], plots: true}
@@ -259,8 +261,8 @@ class Scenario(_Section):
     vehicle: Vehicle = Field(default_factory=Vehicle, description="the vehicle's setpoint or trajectory")
     sensors: Sensors = Field(default_factory=Sensors)
     navigation: NavigationSection | None = Field(None, description="navigation sensors (IMU, DVL, depth, fixes) on "
-                                                 "sites of the model (uvms_mj.scenario.navigation); logged, not fed "
-                                                 "to the controller")
+                                                 "sites of the model (uvms_mj.scenario.navigation); logged; fed to "
+                                                 "the controller through the ESKF with controller.feedback: estimate")
     trajectory: TrajectorySection | None = Field(
         None, description="the end-effector's path (uvms_mj.scenario.paths); absent: the paper's line on the "
         "paper's robot, none (hold the initial tip) on others; null: hold the initial tip")

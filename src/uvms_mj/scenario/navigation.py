@@ -180,6 +180,9 @@ def navigation_issues(sc, m: mujoco.MjModel, dt: float) -> list:
     issues: list = []
     free = any(int(t) == mujoco.mjtJoint.mjJNT_FREE for t in m.jnt_type)
     if not free:
+        if sc.controller.feedback == "estimate":
+            issues.append((("controller", "feedback"), "estimate applies to robots with a free vehicle (MJCF robots "
+                           "with a navigation section); the paper's planar robot has none", "estimate"))
         if nav is not None:
             issues.append((("navigation",), "applies to robots with a free vehicle (MJCF robots such as "
                            "bluerov2_alpha); the paper's planar robot has no navigation sensors", _NO_VALUE))
@@ -187,6 +190,10 @@ def navigation_issues(sc, m: mujoco.MjModel, dt: float) -> list:
             issues.append((("plant", "seabed_depth"), "applies to robots with a free vehicle (for the navigation "
                            "sensors' DVL)", sc.plant.seabed_depth))
         return issues
+    fb = sc.controller.feedback
+    if fb == "estimate" and (nav is None or nav.imu is None or (nav.fix is None and nav.depth is None)):
+        issues.append((("controller", "feedback"), "estimate needs a navigation section with an imu and a position "
+                       "source (fix or depth) for the ESKF; give them or use feedback: truth", fb))
     if nav is None:
         return issues
     sites = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_SITE, i) or "" for i in range(m.nsite)]

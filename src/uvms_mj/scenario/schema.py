@@ -531,7 +531,8 @@ def run_scenario(
     T = float(getattr(ctrl, "T", controller_period(scenario)))
     res = run_closed_loop(plant, ctrl, scenario.duration, T=T, sensor=sensor, seed=scenario.seed,
                           warm_start=scenario.warm_start, on_sample=on_sample, sink=sink,
-                          navigation=nav_config(scenario), nav_sink=nav_sink)
+                          navigation=nav_config(scenario), nav_sink=nav_sink,
+                          feedback=scenario.controller.feedback)
     res.meta.update(name=scenario.name, backend=plant.backend, scenario=resolved(scenario))
     if plant.layout.base_free:  # a floating robot's logs describe it from its model
         from uvms_mj.scenario.robot import robot_info

@@ -19,6 +19,7 @@ motivated, documented, never tuned on the result):
 from __future__ import annotations
 
 import inspect
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -102,7 +103,7 @@ class PaperExperiment:
 
 METRIC_KEYS = ("base_pos_rms_mm", "base_pos_max_mm", "base_att_rms_mrad", "base_att_max_mrad", "tip_rms_mm",
                "tip_max_mm", "thrust_rms_N", "torque_rms_Nm", "saturated_s", "joint_limit_excursion_deg",
-               "singular_s")
+               "singular_s", "nav_pos_rms_mm", "nav_att_rms_mrad")
 
 
 def _torques(s: dict):
@@ -132,6 +133,21 @@ def metrics(result: RunResult) -> dict[str, float]:
     out = _metrics(result)
     out["joint_limit_excursion_deg"] = excursion_metric(result)
     out["singular_s"] = singular_metric(result)
+    out.update(nav_metrics(result))
+    return out
+
+
+def nav_metrics(result: RunResult) -> dict[str, float]:
+    """The online estimate's own error (``controller.feedback: estimate``): ``nav_pos_rms_mm``, the RMS of
+    |p_true - p_estimate| [mm] (world), and ``nav_att_rms_mrad``, the RMS of the angle of R_est^T R_true [mrad],
+    over every control sample of the run (signals ``nav_error_pos``, ``nav_error_att``); NaN without them."""
+    s = result.signals
+    # math.nan itself (one object): two metrics dicts of runs without the estimate still compare equal
+    out = {"nav_pos_rms_mm": math.nan, "nav_att_rms_mrad": math.nan}
+    for key, sig in (("nav_pos_rms_mm", "nav_error_pos"), ("nav_att_rms_mrad", "nav_error_att")):
+        e = s.get(sig)
+        if e is not None and len(e):
+            out[key] = 1e3 * float(np.sqrt(np.mean(np.sum(np.square(e), axis=1))))
     return out
 
 

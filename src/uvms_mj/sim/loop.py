@@ -18,7 +18,7 @@ import numpy as np
 
 from uvms_mj.control.base import Command, Controller, Measurement
 from uvms_mj.plant.plant import DivergenceError, Plant, mujoco_warnings
-from uvms_mj.rotations import quat_from_rotvec, quat_mul
+from uvms_mj.rotations import quat_from_rotvec, quat_mul, quat_to_mat, rotation_log
 from uvms_mj.sim.limits import joint_limit_status, plant_joint_ranges
 from uvms_mj.sim.samples import SampleRecord
 from uvms_mj.sim.sensors import Signal, SignalSensors
@@ -172,6 +172,38 @@ def measure_robot(plant, layout, sensor: SensorModel, rng: np.random.Generator, 
     return q, qd
 
 
+def _start_estimator(navigation, nav, plant, layout, q_true: np.ndarray, qd_true: np.ndarray):
+    """The online ESKF (:class:`uvms_mj.estimation.online.OnlineEstimator`) started at the true pose and
+    velocity of the first sample (our assumption; its prior covariance is ``online.P0_SIGMA``)."""
+    from uvms_mj.estimation.online import OnlineEstimator
+
+    a, d = layout.base_qadr, layout.base_dadr
+    return OnlineEstimator(navigation, nav.record, plant.model.opt.gravity, nav.rho, q_true[a:a + 3].copy(),
+                           qd_true[d:d + 3].copy(), q_true[a + 3:a + 7].copy())
+
+
+def _estimated(est, meas: Measurement, layout, q_true: np.ndarray, t: float) -> tuple[Measurement, dict]:
+    """``meas`` with the vehicle's pose (and, when measured, velocity: world linear, body angular, the free
+    joint's qvel convention) replaced by the online estimate at ``t`` after feeding what has arrived by then;
+    and the row of the estimate's signals (run_closed_loop's ``feedback``)."""
+    est.feed(t)
+    e = est.state(t)
+    a, d = layout.base_qadr, layout.base_dadr
+    q = np.array(meas.q, dtype=float)
+    q[a:a + 3] = e.position
+    q[a + 3:a + 7] = e.quat / np.linalg.norm(e.quat)
+    qd = None
+    if meas.qd is not None:
+        qd = np.array(meas.qd, dtype=float)
+        qd[d:d + 3] = e.velocity
+        qd[d + 3:d + 6] = e.angular_velocity
+    R_err = quat_to_mat(q[a + 3:a + 7]).T @ quat_to_mat(q_true[a + 3:a + 7])
+    row = {"nav_estimate": np.r_[e.position, q[a + 3:a + 7]], "nav_sigma_pos": e.sigma[0:3],
+           "nav_sigma_att": e.sigma[6:9],
+           "nav_error_pos": q_true[a:a + 3] - e.position, "nav_error_att": rotation_log(R_err)}
+    return Measurement(k=meas.k, t=meas.t, q=q, qd=qd), row
+
+
 def run_closed_loop(
     plant: Plant,
     controller: Controller,
@@ -184,6 +216,7 @@ def run_closed_loop(
     sink: Callable[[float, dict], None] | None = None,
     navigation: Any = None,
     nav_sink: Callable[[str, Any, dict], None] | None = None,
+    feedback: str = "truth",
 ) -> RunResult:
     """Run ``controller`` on ``plant`` for ``duration`` seconds.
 
@@ -200,7 +233,16 @@ def run_closed_loop(
             between the plant's steps into ``RunResult.navigation``; the controller does not see them.
         nav_sink: called with (kind, sample, extra) for every navigation sample as it is taken
             (e.g. an MCAP recorder's ``write_navigation``).
+        feedback: ``"truth"`` (the measured truth of ``sensor``) or ``"estimate"``: the ESKF runs online on
+            the navigation samples as they arrive (:class:`uvms_mj.estimation.online.OnlineEstimator`) and the
+            controller's vehicle pose (and velocity, with a velocity sensor) is its estimate at the sample;
+            the joints stay ``sensor``'s. Logs ``nav_estimate`` (position world, quat w x y z),
+            ``nav_sigma_pos`` [m], ``nav_sigma_att`` [rad] (body), ``nav_error_pos`` (true - estimate,
+            world [m]) and ``nav_error_att``
+            (the rotation vector of R_est^T R_true, body [rad]).
     """
+    if feedback not in ("truth", "estimate"):
+        raise ValueError(f"feedback = {feedback!r}; allowed: truth, estimate")
     dt = plant.model.opt.timestep
     sub = T / dt
     if abs(sub - round(sub)) > 1e-9 or round(sub) < 1:
@@ -232,6 +274,12 @@ def run_closed_loop(
         hydro = getattr(plant, "hydro_info", None)
         nav = NavigationSuite(plant.model, plant.data, navigation, seed, plant.layout.base_body,
                               float(hydro.water.density) if hydro is not None else 1000.0, sink=nav_sink)
+    est = None  # feedback = "estimate": the online ESKF, started at the first sample
+    if feedback == "estimate" and (nav is None or layout is None):
+        raise ValueError("feedback = 'estimate' needs navigation sensors on a robot with a free vehicle")
+        est = OnlineEstimator(navigation, nav.record, plant.model.opt.gravity, nav.rho, q0[a0:a0 + 3],
+                              qd0[layout.base_dof:layout.base_dof + 3] if hasattr(layout, "base_dof") else
+                              qd0[a0:a0 + 3], q0[a0 + 3:a0 + 7])
 
     def measure(k: int, q_true: np.ndarray, qd_true: np.ndarray) -> Measurement:
         nonlocal q_prev_meas
@@ -272,6 +320,11 @@ def run_closed_loop(
             on_event(k * T)
         q_true, qd_true, tip_true, thr_lagged = state
         meas = Measurement(k, k * T, q_true.copy()) if exact else measure(k, q_true, qd_true)
+        nav_row = None
+        if feedback == "estimate":
+            if est is None:
+                est = _start_estimator(navigation, nav, plant, layout, q_true, qd_true)
+            meas, nav_row = _estimated(est, meas, layout, q_true, k * T)
         if k == 0:
             controller.reset(meas)
         cmd: Command = controller.compute(meas)
@@ -298,6 +351,8 @@ def run_closed_loop(
                "torques": torques, "torques_applied": applied}
         if sea_signals is not None:
             row.update(sea_signals())
+        if nav_row is not None:
+            row.update(nav_row)
         rows.append(row)
         if sink is not None:
             sink(k * T, row)
