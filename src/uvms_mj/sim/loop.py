@@ -277,9 +277,6 @@ def run_closed_loop(
     est = None  # feedback = "estimate": the online ESKF, started at the first sample
     if feedback == "estimate" and (nav is None or layout is None):
         raise ValueError("feedback = 'estimate' needs navigation sensors on a robot with a free vehicle")
-        est = OnlineEstimator(navigation, nav.record, plant.model.opt.gravity, nav.rho, q0[a0:a0 + 3],
-                              qd0[layout.base_dof:layout.base_dof + 3] if hasattr(layout, "base_dof") else
-                              qd0[a0:a0 + 3], q0[a0 + 3:a0 + 7])
 
     def measure(k: int, q_true: np.ndarray, qd_true: np.ndarray) -> Measurement:
         nonlocal q_prev_meas
