@@ -51,9 +51,11 @@ def metrics_table(results: dict[str, dict[str, float]], status: dict[str, str] |
         vals = [results[n].get(key, float("nan")) for n in names]
         if key in _OPTIONAL_ROWS and all(v != v for v in vals):
             continue
-        line = f"{label:<28}" + "".join(f"{v:>12.4g}" for v in vals)
+        # "-": a metric a run does not have (NaN), a ratio that is not defined (0 / 0, NaN)
+        line = f"{label:<28}" + "".join(f"{v:>12.4g}" if v == v else f"{'-':>12}" for v in vals)
         if ratio:
-            line += f"{(vals[1] / vals[0]) if vals[0] else float('nan'):>9.2f}"
+            r = (vals[1] / vals[0]) if vals[0] else float("nan")
+            line += f"{r:>9.2f}" if r == r else f"{'-':>9}"
         lines.append(line)
     return "\n".join(lines)
 
