@@ -261,8 +261,9 @@ def _record_finished(futs: dict, recorded: set, done: Callable[[dict, dict], Non
             done(t, res)
 
 
-#: A log closed with one of these statuses is a finished run (not "interrupted").
-_FINISHED = ("ok", "diverged", "error", "joint_limit")
+#: The statuses of a finished run: not retried on resume (``crashed`` is); a log closed with one
+#: of them (not "interrupted") is a finished run.
+FINISHED = ("ok", "diverged", "error", "joint_limit")
 
 
 def _result_from_log(task: dict) -> dict | None:
@@ -276,7 +277,7 @@ def _result_from_log(task: dict) -> dict | None:
         from uvms_mj.sim.experiment import metrics
 
         data = read_log(log)
-        if data.truncated or data.status not in _FINISHED:
+        if data.truncated or data.status not in FINISHED:
             return None
         return {"status": str(data.status), "reason": _one_line(data.reason or ""),
                 "metrics": {k: float(v) for k, v in metrics(data).items()},

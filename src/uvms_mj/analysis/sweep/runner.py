@@ -13,16 +13,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from uvms_mj.io.atomic import atomic_open
-from uvms_mj.analysis.sweep.engines import _ENGINES, check_engine
+from uvms_mj.analysis.sweep.engines import _ENGINES, FINISHED, check_engine
 from uvms_mj.analysis.sweep.figures import plot_sweep
 from uvms_mj.analysis.sweep.plan import SweepPlan, _jsonable
 from uvms_mj.analysis.sweep.spec import SweepError
 from uvms_mj.analysis.sweep.summary import summarize
 from uvms_mj.analysis.sweep.table import _row, _write_table
-
-#: The statuses of a finished run (not retried on resume; ``crashed`` is).
-FINISHED = ("ok", "diverged", "error", "joint_limit")
-
 
 def _read_jsonl(path: Path) -> list[dict]:
     rows = []
