@@ -213,6 +213,7 @@ def _engine_process(tasks: list[dict], workers: int, done: Callable[[dict, dict]
                 stop.set()
                 _end_pool(pool)
                 _record_finished(futs, recorded, done)
+                _drop_unopened_logs(t for f, t in futs.items() if f not in recorded)
                 raise
             pool.shutdown(wait=True)
     finally:
@@ -286,6 +287,25 @@ def _result_from_log(task: dict) -> dict | None:
         return None
 
 
+def _drop_unopened_logs(tasks) -> None:
+    """Remove the logs of interrupted runs whose worker was ended between creating the file and
+    writing its header (not an MCAP file, so not a log any command can read); a log with its
+    header stays (readable, called truncated or interrupted)."""
+    from uvms_mj.io.reader import _MAGIC
+
+    for t in tasks:
+        log = t.get("log")
+        if not log:
+            continue
+        try:
+            with open(log, "rb") as f:
+                head = f.read(len(_MAGIC))
+        except OSError:
+            continue
+        if head != _MAGIC:
+            Path(log).unlink(missing_ok=True)
+
+
 def _engine_ray(tasks: list[dict], workers: int, done: Callable[[dict, dict], None]) -> None:
     try:
         import ray
@@ -329,6 +349,9 @@ def _engine_ray(tasks: list[dict], workers: int, done: Callable[[dict, dict], No
                     ray.cancel(ref, force=True)
                 except Exception:  # noqa: BLE001 - a task that ended meanwhile
                     pass
+            if pending:  # the cancels are asynchronous: let the killed workers go before the clean-up
+                ray.wait(list(pending), num_returns=len(pending), timeout=WORKER_GRACE_S)
+            _drop_unopened_logs(pending.values())
             raise
     finally:
         if started and not interrupted:
