@@ -62,8 +62,13 @@ def one_run(log: bool, split: bool = False, scenario: Path = SCENARIO) -> dict:
             timers["plant"] = plant.step = Timer(plant.step)
         timers["controller"] = ctrl.compute = Timer(ctrl.compute)
     with tempfile.TemporaryDirectory() as tmp:
-        kw = {"model": plant.model} if getattr(plant, "layout", None) is not None else {}
-        rec = McapRecorder(Path(tmp) / "bench.mcap", plant.params, {"bench": True}, **kw) if log else None
+        meta, kw = {"bench": True}, {}
+        if getattr(getattr(plant, "layout", None), "base_free", False):  # as `uvms-mj run` records a floating robot
+            from uvms_mj.scenario.robot import robot_info
+
+            meta["robot"] = robot_info(sc, plant)
+            kw["model"] = getattr(plant, "robot_model", plant.model)
+        rec = McapRecorder(Path(tmp) / "bench.mcap", plant.params, meta, **kw) if log else None
         sink = None
         if rec is not None:
             sink = rec.write_sample
