@@ -34,6 +34,7 @@ from uvms_mj.io.schemas import (LOG_FORMAT, METADATA_NAME, PAPER_JOINT_NAMES, RE
                                 STATUS_NAME, TOPIC_CONTROL, TOPIC_JOINTS, TOPIC_PATHS, TOPIC_SCENE, TOPIC_STATE,
                                 TOPIC_TF, _sample_schema)
 from uvms_mj.io.sinks import Tee
+from uvms_mj.io.writer_process import _WriterProcess, process_wanted
 from uvms_mj.plant.params import RobotParams
 
 if TYPE_CHECKING:
@@ -64,6 +65,10 @@ class McapRecorder(NavigationChannels):
             logs). The tip site is ``metadata["robot"]["layout"]["tip_site"]`` when given, else
             :meth:`~uvms_mj.plant.robot.Layout.of`'s default.
         live: a second sink (:class:`~uvms_mj.io.live.LiveServer`: to Foxglove), fed as the file is, pacing the run.
+        writer: "process": after the first sample, a forked writer process encodes, compresses and
+            writes the samples (:mod:`uvms_mj.io.writer_process`: the same bytes, off the
+            simulation's core); "inline": this process does; "auto" (default): "process" where it
+            pays (Linux, 2 or more cores, flush_interval > 0, no live sink, not in a pool's worker).
 
     Use it as a context manager: leaving the block closes the log, with status "ok", or
     "interrupted" on KeyboardInterrupt (and SIGTERM inside :func:`handle_sigterm`), or "error"
@@ -83,9 +88,12 @@ class McapRecorder(NavigationChannels):
         compression: str = "zstd",
         model: "mujoco.MjModel | None" = None,
         live: "LiveServer | None" = None,
+        writer: str = "auto",
     ) -> None:
         if not (flush_interval >= 0 and math.isfinite(flush_interval)):
             raise ValueError(f"flush_interval = {flush_interval!r} s must be finite and >= 0")
+        self._proc: _WriterProcess | None = None
+        self._proc_wanted = process_wanted(writer, float(flush_interval), live)
         metadata = dict(metadata or {})
         self._robot = None
         if model is not None:
@@ -288,11 +296,21 @@ class McapRecorder(NavigationChannels):
                     self._warned.add(name)
                     warnings.warn(f"recorder: signal {name!r} first appeared after the first "
                                   "sample; it is not recorded", stacklevel=3)
-            self._pending.append((t, ns, self.samples, dict(row), same))
+            proc = self._proc
+            if proc is not None:  # the writer process's batch (uvms_mj.io.writer_process)
+                proc.add((t, dict(row), same))
+            else:
+                self._pending.append((t, ns, self.samples, dict(row), same))
             self.samples += 1
             self._last_ns = ns
             if self.samples == 1 or time.monotonic() - self._last_flush >= self.flush_interval:
-                self.flush()
+                if proc is not None:
+                    proc.send(True)
+                    self._last_flush = time.monotonic()
+                else:
+                    self.flush()
+                    if self.samples == 1 and self._proc_wanted:
+                        self._proc = _WriterProcess(self, row)
         if self._live is not None and self._live.pace(t):  # (outside the critical section: Ctrl-C ends a wait)
             with _CRITICAL:
                 self._write_pending()
@@ -560,8 +578,11 @@ class McapRecorder(NavigationChannels):
         if self.closed:
             return
         with _critical():
-            self._write_pending()
-            self._writer.flush()
+            if self._proc is not None:
+                self._proc.flush()  # (waits for the writer process's flush)
+            else:
+                self._write_pending()
+                self._writer.flush()
             self._last_flush = time.monotonic()
 
     def close(self, status: str = "ok", reason: str = "", meta: Mapping[str, Any] | None = None) -> None:
@@ -571,6 +592,12 @@ class McapRecorder(NavigationChannels):
             return
         with _critical():
             self.closed = True
+            if self._proc is not None:  # the writer process closes the log
+                try:
+                    self._proc.close(status, reason, meta)
+                finally:
+                    self._file.close()
+                return
             failed = None
             try:
                 try:
