@@ -163,6 +163,7 @@ class _WriterProcess:
         self.batch: list = []
         self.navs: list = []
         self.error: BaseException | None = None
+        self.dead = ""  # why the child ended unexpectedly (then nothing more is written)
         down_r, down_w = os.pipe()
         up_r, up_w = os.pipe()
         rec._file.flush()  # nothing of the file left in this process's buffer: the child writes it
@@ -198,6 +199,8 @@ class _WriterProcess:
     def send(self, flush: bool, sync: bool = False) -> None:
         """Hand the pending rows (and navigation samples) to the child; with ``flush`` the child
         flushes after writing them; with ``sync`` wait until it has."""
+        if self.dead:
+            raise RuntimeError(self.dead)
         self._check()
         rows, self.batch = self.batch, []
         navs, self.navs = self.navs, []
@@ -243,9 +246,9 @@ class _WriterProcess:
     def _died(self):
         status = _reap(self.pid, self.down, self.up, block=True)
         self._finalizer.detach()
-        self.rec._proc = None
-        raise RuntimeError(f"the log writer process of {self.rec.path} ended unexpectedly ({status}); "
-                           "the log is cut short (it reads as truncated)")
+        self.dead = (f"the log writer process of {self.rec.path} ended unexpectedly ({status}); "
+                     "the log is cut short (it reads as truncated)")
+        raise RuntimeError(self.dead)
 
     # -- flush, close
 
@@ -255,6 +258,9 @@ class _WriterProcess:
 
     def close(self, status: str, reason: str, meta: Mapping[str, Any] | None) -> str:
         """Write the rows left, then the child closes the log; returns the log's status."""
+        if self.dead:  # (already raised): the log stays as the child left it
+            self.rec.status = "truncated"
+            return "truncated"
         rows, self.batch = self.batch, []
         navs, self.navs = self.navs, []
         try:
@@ -272,10 +278,10 @@ class _WriterProcess:
             final, failed = self._talk(data, True)
             self.rec.status = final
         finally:
-            if self.rec._proc is self:
+            if not self.dead:
                 _reap(self.pid, self.down, self.up, block=True)
                 self._finalizer.detach()
-                self.rec._proc = None
+            self.rec._proc = None
         if failed is not None:
             raise failed
         if self.error is not None:  # an earlier write failed and was not raised yet
