@@ -22,8 +22,8 @@ import numpy as np
 from mcap.writer import CompressionType
 
 from uvms_mj.io.encoding import (_IDENTITY, _NUMPY, _PAPER_PATHS, _TF_KEYS, _ZERO3, _PathSpec, _batch_bodies, _color,
-                                 _dumps, _enc, _entity, _layout_entry, _meta_value, _ns, _orjson, _point, _quat_z,
-                                 _sample_body, _stamp, _tf_template)
+                                 _dumps, _enc, _entity, _layout_entry, _meta_value, _ns, _orjson, _paper_scene,
+                                 _path_value, _point, _sample_body, _stamp, _tf_template)
 from uvms_mj.io.interrupts import _CRITICAL, _critical
 from uvms_mj.io.mcap_writer import LeanWriter
 from uvms_mj.io.nav_channels import NavigationChannels
@@ -238,36 +238,13 @@ class McapRecorder(NavigationChannels):
         if self.params is not None:
             self._writer.add_message(self._channel(TOPIC_SCENE, "foxglove.SceneUpdate",
                                                    SCHEMAS["foxglove.SceneUpdate"]),
-                                     ns, _dumps(self._robot_scene(stamp)), ns, 0)
+                                     ns, _dumps(_paper_scene(self.params, stamp)), ns, 0)
         self._path_sent_t = ns * 1e-9
         self._path_specs = _PAPER_PATHS
         self._want_paths = self.params is not None and (
             np.shape(row.get("p_desired", ())) == (5,) or np.shape(row.get("tip_true", ())) == (2,))
         if self._want_paths:
             self._channel(TOPIC_PATHS, "foxglove.SceneUpdate", SCHEMAS["foxglove.SceneUpdate"])
-
-    def _robot_scene(self, stamp: dict) -> dict:
-        colors = {"base": _color(0.85, 0.55, 0.15, 0.9)}
-        ents = []
-        for b in self.params.bodies:
-            cube = {"pose": {"position": {"x": b.box_center[0], "y": b.box_center[1], "z": 0.0},
-                             "orientation": dict(_IDENTITY)},
-                    "size": {"x": 2 * b.box_half[0], "y": 2 * b.box_half[1], "z": b.width},
-                    "color": colors.get(b.name, _color(0.6, 0.6, 0.65, 0.9))}
-            ents.append(_entity(b.name, b.name, stamp, cubes=[cube]))
-        arrows = []
-        for th in self.params.thrusters:
-            ang = math.atan2(th.direction[1], th.direction[0])
-            arrows.append({"pose": {"position": {"x": th.position[0], "y": th.position[1], "z": 0.0},
-                                    "orientation": _quat_z(ang)},
-                           "shaft_length": 0.12, "shaft_diameter": 0.015, "head_length": 0.04,
-                           "head_diameter": 0.035, "color": _color(0.2, 0.6, 1.0)})
-        if arrows:
-            ents.append(_entity(self.params.bodies[0].name, "thrusters", stamp, arrows=arrows))
-        tip = {"pose": {"position": dict(_ZERO3), "orientation": dict(_IDENTITY)},
-               "size": {"x": 0.025, "y": 0.025, "z": 0.025}, "color": _color(1.0, 0.2, 0.2)}
-        ents.append(_entity("tip", "tip", stamp, spheres=[tip]))
-        return {"deletions": [], "entities": ents}
 
     # ---------------------------------------------------------------- writing
 
@@ -513,7 +490,7 @@ class McapRecorder(NavigationChannels):
                     j = j2
                     continue
                 t, row = rows[j][0], rows[j][3]
-                xs = self._path_value(spec, row)
+                xs = _path_value(spec, row)
                 if xs is not None:
                     self._paths.setdefault(key, []).append(_point(*xs))
                     kept_t = self._path_kept_t[key] = t
@@ -522,16 +499,6 @@ class McapRecorder(NavigationChannels):
                     self._path_dirty = True
                 j += 1
 
-    @staticmethod
-    def _path_value(spec: "_PathSpec", row: Mapping[str, Any]) -> list | None:
-        v = row.get(spec.signal)
-        if v is None:
-            return None
-        i = spec.start
-        xs = (v[i:i + spec.dims].tolist() if type(v) is np.ndarray and v.dtype == np.float64
-              else [float(v[i + j]) for j in range(spec.dims)])
-        return xs if all(map(math.isfinite, xs)) else None
-
     def _settle_paths(self) -> None:
         """The strips' last points from the rows kept since each strip's last point."""
         for spec in self._path_specs:
@@ -539,7 +506,7 @@ class McapRecorder(NavigationChannels):
             if not recent:
                 continue
             for row in reversed(recent):
-                xs = self._path_value(spec, row)
+                xs = _path_value(spec, row)
                 if xs is not None:
                     self._path_last[spec.key] = xs
                     self._path_dirty = True
