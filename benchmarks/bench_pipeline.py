@@ -96,7 +96,8 @@ def one_run(log: bool, split: bool = False, scenario: Path = SCENARIO, writer: s
         cpu = time.process_time() - c0
         child = _child_cpu() - k0
     steps = round(sc.duration / plant.model.opt.timestep)
-    return {"wall": wall, "cpu": cpu, "child_cpu": child, "steps": steps, "sim": sc.duration, "timers": {k: v.total for k, v in timers.items()},
+    return {"wall": wall, "cpu": cpu, "child_cpu": child, "steps": steps, "sim": sc.duration,
+            "timers": {k: v.total for k, v in timers.items()},
             "integrator": plant.model.opt.integrator, "timestep": plant.model.opt.timestep, "backend": plant.backend,
             "path": plant.model_path, "T": T, "controller": ctrl.name}
 

@@ -130,9 +130,9 @@ child's traceback as a note; ``close`` waits for the child and reaps it; a child
 RuntimeError, never a hang. ``writer="inline"`` (or ``UVMS_MJ_LOG_WRITER=inline``) writes in
 this process.
 
-Speed: the samples are encoded in batches at each flush (inline; in the writer process, at each batch) (per batch one orjson call for the
-sample channels and one for the paper's /tf and /joint_states numbers, whose templates are then
-filled for the whole batch in one operation each; the same bytes as one sample at a time, which
+Speed: the samples are encoded in batches at each flush (in the writer process: at each batch;
+per batch one orjson call for the sample channels and one for the paper's /tf and /joint_states
+numbers, whose templates are then filled for the whole batch in one operation each; the same bytes as one sample at a time, which
 irregular rows -- a non-finite number, a missing or late signal -- still take), added to the
 chunk in one call per batch, and compressed by one reused zstd compressor
 at level 1 (:class:`uvms_mj.io.mcap_writer.LeanWriter`). A row is kept (a shallow copy) until its
