@@ -136,7 +136,8 @@ numbers, whose templates are then filled for the whole batch in one operation ea
 bytes as one sample at a time, which irregular rows -- a non-finite number, a missing or late
 signal -- still take), added to the chunk in one call per batch, and compressed by one reused
 zstd compressor at level 1 (:class:`uvms_mj.io.mcap_writer.LeanWriter`). A row is kept (a
-shallow copy) until its batch is written: its arrays must not be changed in place after :meth:`McapRecorder.write_sample`.
+shallow copy) until its batch is written: its arrays must not be changed in place after
+:meth:`McapRecorder.write_sample`.
 
 Live view: given ``live=`` (:class:`uvms_mj.io.live.LiveServer`, ``uvms-mj run --live``), the recorder
 writes the same channels and messages through :class:`uvms_mj.io.sinks.Tee` to the file and to the
