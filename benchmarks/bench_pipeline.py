@@ -5,12 +5,16 @@
 Prints, for scenarios/paper.yaml (40 s, rac_dob) and the 3-D circle study
 scenarios/bluerov2_alpha_circle_current.yaml (40 s, rac_dob; BlueROV2 Heavy + Alpha arm, 50 Hz):
   * the real-time factor of the whole pipeline (plant with hydrodynamics + 60 Hz controller +
-    MCAP logging, the log closed) and of the pipeline without logging, by wall-clock time and by
-    the process's CPU time (which a busy machine's preemptions do not inflate);
+    MCAP logging, the log closed) with the recorder's writer process (the default: encoding,
+    compression and writes in a forked process, uvms_mj.io.writer_process) and with the inline
+    writer, and of the pipeline without logging, by wall-clock time and by the process's CPU
+    time (which a busy machine's preemptions do not inflate; the writer process's own CPU time
+    is printed apart: it runs on the other core);
   * its ratio to bare MuJoCo stepping of the same model (no hydrodynamics, same integrator and
-    timestep) over the same number of steps;
+    timestep) over the same number of steps, by wall-clock time and by CPU time;
   * the split of the time between MuJoCo, hydrodynamics, controller, logging (write_sample and
-    close: the recorder encodes its samples in batches at each flush) and the loop;
+    close in the simulation's process: with the writer process, the hand-off of the samples and
+    the wait for the last batch at close; inline, the encoding and writing) and the loop;
   * sweep throughput (runs per second) with 1 and 2 worker processes.
 Best of --repeats (the machine is shared and noisy).
 """
@@ -20,6 +24,7 @@ from __future__ import annotations
 import argparse
 import concurrent.futures as cf
 import multiprocessing as mp
+import resource
 import tempfile
 import time
 from pathlib import Path
@@ -50,7 +55,12 @@ class Timer:
             self.total += time.perf_counter() - t0
 
 
-def one_run(log: bool, split: bool = False, scenario: Path = SCENARIO) -> dict:
+def _child_cpu() -> float:
+    r = resource.getrusage(resource.RUSAGE_CHILDREN)  # (reaped children: the writer process after close)
+    return r.ru_utime + r.ru_stime
+
+
+def one_run(log: bool, split: bool = False, scenario: Path = SCENARIO, writer: str = "auto") -> dict:
     sc = load_scenario(scenario)
     plant, ctrl = build(sc)
     T = ctrl.T
@@ -68,13 +78,13 @@ def one_run(log: bool, split: bool = False, scenario: Path = SCENARIO) -> dict:
 
             meta["robot"] = robot_info(sc, plant)
             kw["model"] = getattr(plant, "robot_model", plant.model)
-        rec = McapRecorder(Path(tmp) / "bench.mcap", plant.params, meta, **kw) if log else None
+        rec = McapRecorder(Path(tmp) / "bench.mcap", plant.params, meta, writer=writer, **kw) if log else None
         sink = None
         if rec is not None:
             sink = rec.write_sample
             if split:
                 sink = timers["logging"] = Timer(rec.write_sample)
-        t0, c0 = time.perf_counter(), time.process_time()
+        t0, c0, k0 = time.perf_counter(), time.process_time(), _child_cpu()
         res = run_closed_loop(plant, ctrl, sc.duration, T=T, sensor=sensor_model(sc), seed=sc.seed,
                               warm_start=sc.warm_start, sink=sink)
         if rec is not None:  # close encodes and writes the samples since the last flush: logging too
@@ -84,8 +94,10 @@ def one_run(log: bool, split: bool = False, scenario: Path = SCENARIO) -> dict:
                 timers["logging"].total += close.total
         wall = time.perf_counter() - t0
         cpu = time.process_time() - c0
+        child = _child_cpu() - k0
     steps = round(sc.duration / plant.model.opt.timestep)
-    return {"wall": wall, "cpu": cpu, "steps": steps, "sim": sc.duration, "timers": {k: v.total for k, v in timers.items()},
+    return {"wall": wall, "cpu": cpu, "child_cpu": child, "steps": steps, "sim": sc.duration,
+            "timers": {k: v.total for k, v in timers.items()},
             "integrator": plant.model.opt.integrator, "timestep": plant.model.opt.timestep, "backend": plant.backend,
             "path": plant.model_path, "T": T, "controller": ctrl.name}
 
@@ -99,10 +111,10 @@ def bare(steps: int, integrator, timestep: float, path=None) -> float:
     d = mujoco.MjData(m)
     if m.nkey:
         mujoco.mj_resetDataKeyframe(m, d, 0)
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
     for _ in range(steps):
         mujoco.mj_step(m, d)
-    return time.perf_counter() - t0
+    return time.perf_counter() - t0, time.process_time() - c0
 
 
 def sweep_job(duration: float) -> float:
@@ -123,21 +135,26 @@ def sweep_throughput(workers: int, runs: int, duration: float) -> float:
 
 def report(scenario: Path, repeats: int) -> None:
     fulls = [one_run(log=True, scenario=scenario) for _ in range(repeats)]
+    inlines = [one_run(log=True, scenario=scenario, writer="inline") for _ in range(repeats)]
     nologs = [one_run(log=False, scenario=scenario) for _ in range(repeats)]
     full, nolog = min(fulls, key=lambda r: r["wall"]), min(nologs, key=lambda r: r["wall"])
+    inline = min(inlines, key=lambda r: r["wall"])
     split = min((one_run(log=True, split=True, scenario=scenario) for _ in range(repeats)), key=lambda r: r["wall"])
-    t_bare = min(bare(full["steps"], full["integrator"], full["timestep"], full["path"]) for _ in range(repeats))
+    bares = [bare(full["steps"], full["integrator"], full["timestep"], full["path"]) for _ in range(repeats)]
+    t_bare, c_bare = min(b[0] for b in bares), min(b[1] for b in bares)
 
     sim = full["sim"]
     print(f"{scenario.stem}: {sim:g} s simulated, {full['steps']} physics steps ({full['timestep'] * 1e3:.3g} ms), "
           f"controller {full['controller']} at {1 / full['T']:.0f} Hz, backend {full['backend']}, best of {repeats}")
-    cpu_full = min(r["cpu"] for r in fulls)
-    cpu_nolog = min(r["cpu"] for r in nologs)
-    print(f"  pipeline with logging     {full['wall']:7.3f} s   {sim / full['wall']:6.1f}x real time   "
-          f"{full['wall'] / t_bare:5.1f}x bare MuJoCo   (CPU time {cpu_full:.3f} s: {sim / cpu_full:.1f}x)")
-    print(f"  pipeline without logging  {nolog['wall']:7.3f} s   {sim / nolog['wall']:6.1f}x real time   "
-          f"{nolog['wall'] / t_bare:5.1f}x bare MuJoCo   (CPU time {cpu_nolog:.3f} s: {sim / cpu_nolog:.1f}x)")
-    print(f"  bare MuJoCo stepping      {t_bare:7.3f} s   {sim / t_bare:6.1f}x real time")
+    rows = [("with logging (writer process)", full, fulls), ("with logging (inline writer)", inline, inlines),
+            ("without logging", nolog, nologs)]
+    print(f"  {'pipeline':<38}{'wall':>8}   {'real time':>9}  {'/ bare':>6}   {'CPU':>7}  {'/ bare':>6}   writer CPU")
+    for label, best, runs in rows:
+        cpu = min(r["cpu"] for r in runs)
+        kid = min(r["child_cpu"] for r in runs)
+        print(f"  {label:<38}{best['wall']:7.3f}s  {sim / best['wall']:8.1f}x  {best['wall'] / t_bare:5.2f}x   "
+              f"{cpu:6.3f}s  {cpu / c_bare:5.2f}x   " + (f"{kid:.3f} s" if kid > 0 else "-"))
+    print(f"  {'bare MuJoCo stepping':<38}{t_bare:7.3f}s  {sim / t_bare:8.1f}x  {1:5.2f}x   {c_bare:6.3f}s  {1:5.2f}x")
     tm = split["timers"]
     parts = {
         "MuJoCo (bare stepping)": t_bare,

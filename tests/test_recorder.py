@@ -810,7 +810,7 @@ def test_regular_batches_are_the_per_sample_encoding(tmp_path, params, monkeypat
     logs = {}
     for label, interval in (("each", 0.0), ("batch", 1e9)):
         path = tmp_path / f"{label}.mcap"
-        with McapRecorder(path, params, {}, flush_interval=interval) as rec:
+        with McapRecorder(path, params, {}, flush_interval=interval, writer="inline") as rec:  # (spied: inline)
             for k in range(300):
                 r = synthetic_row(k)
                 r = {**{n: r.pop(n) for n in ("q_true", "qd_true", "tip_true")}, **r, "count": np.int64(k)}

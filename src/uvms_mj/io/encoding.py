@@ -245,3 +245,37 @@ def _tf_template(chain: list[tuple[str, str, tuple[float, float] | None, dict | 
     return '{"transforms":[' + ",".join(parts) + "]}"
 
 
+def _paper_scene(params, stamp: dict) -> dict:
+    """The paper robot's SceneUpdate: its bodies' boxes, thruster arrows and the tip."""
+    colors = {"base": _color(0.85, 0.55, 0.15, 0.9)}
+    ents = []
+    for b in params.bodies:
+        cube = {"pose": {"position": {"x": b.box_center[0], "y": b.box_center[1], "z": 0.0},
+                         "orientation": dict(_IDENTITY)},
+                "size": {"x": 2 * b.box_half[0], "y": 2 * b.box_half[1], "z": b.width},
+                "color": colors.get(b.name, _color(0.6, 0.6, 0.65, 0.9))}
+        ents.append(_entity(b.name, b.name, stamp, cubes=[cube]))
+    arrows = []
+    for th in params.thrusters:
+        ang = math.atan2(th.direction[1], th.direction[0])
+        arrows.append({"pose": {"position": {"x": th.position[0], "y": th.position[1], "z": 0.0},
+                                "orientation": _quat_z(ang)},
+                       "shaft_length": 0.12, "shaft_diameter": 0.015, "head_length": 0.04,
+                       "head_diameter": 0.035, "color": _color(0.2, 0.6, 1.0)})
+    if arrows:
+        ents.append(_entity(params.bodies[0].name, "thrusters", stamp, arrows=arrows))
+    tip = {"pose": {"position": dict(_ZERO3), "orientation": dict(_IDENTITY)},
+           "size": {"x": 0.025, "y": 0.025, "z": 0.025}, "color": _color(1.0, 0.2, 0.2)}
+    ents.append(_entity("tip", "tip", stamp, spheres=[tip]))
+    return {"deletions": [], "entities": ents}
+
+
+def _path_value(spec: _PathSpec, row: Mapping[str, Any]) -> list | None:
+    """A path strip's point of ``row`` (its ``dims`` numbers), or None where it is not finite."""
+    v = row.get(spec.signal)
+    if v is None:
+        return None
+    i = spec.start
+    xs = (v[i:i + spec.dims].tolist() if type(v) is np.ndarray and v.dtype == np.float64
+          else [float(v[i + j]) for j in range(spec.dims)])
+    return xs if all(map(math.isfinite, xs)) else None

@@ -103,7 +103,8 @@ class NavigationChannels:
         """Record one navigation sample (the loop's ``nav_sink``); written at the next flush."""
         if getattr(self, "closed", False):
             raise RuntimeError("recorder is closed")
-        pend = self.__dict__.setdefault("_nav_pending", [])
+        proc = self.__dict__.get("_proc")
+        pend = proc.navs if proc is not None else self.__dict__.setdefault("_nav_pending", [])
         pend.append((kind, sample, dict(extra)))
 
     def _write_navigation(self) -> None:

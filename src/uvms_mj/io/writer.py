@@ -22,8 +22,8 @@ import numpy as np
 from mcap.writer import CompressionType
 
 from uvms_mj.io.encoding import (_IDENTITY, _NUMPY, _PAPER_PATHS, _TF_KEYS, _ZERO3, _PathSpec, _batch_bodies, _color,
-                                 _dumps, _enc, _entity, _layout_entry, _meta_value, _ns, _orjson, _point, _quat_z,
-                                 _sample_body, _stamp, _tf_template)
+                                 _dumps, _enc, _entity, _layout_entry, _meta_value, _ns, _orjson, _paper_scene,
+                                 _path_value, _point, _sample_body, _stamp, _tf_template)
 from uvms_mj.io.interrupts import _CRITICAL, _critical
 from uvms_mj.io.mcap_writer import LeanWriter
 from uvms_mj.io.nav_channels import NavigationChannels
@@ -34,6 +34,7 @@ from uvms_mj.io.schemas import (LOG_FORMAT, METADATA_NAME, PAPER_JOINT_NAMES, RE
                                 STATUS_NAME, TOPIC_CONTROL, TOPIC_JOINTS, TOPIC_PATHS, TOPIC_SCENE, TOPIC_STATE,
                                 TOPIC_TF, _sample_schema)
 from uvms_mj.io.sinks import Tee
+from uvms_mj.io.writer_process import _WriterProcess, process_wanted
 from uvms_mj.plant.params import RobotParams
 
 if TYPE_CHECKING:
@@ -64,6 +65,10 @@ class McapRecorder(NavigationChannels):
             logs). The tip site is ``metadata["robot"]["layout"]["tip_site"]`` when given, else
             :meth:`~uvms_mj.plant.robot.Layout.of`'s default.
         live: a second sink (:class:`~uvms_mj.io.live.LiveServer`: to Foxglove), fed as the file is, pacing the run.
+        writer: "process": after the first sample, a forked writer process encodes, compresses and
+            writes the samples (:mod:`uvms_mj.io.writer_process`: the same bytes, off the
+            simulation's core); "inline": this process does; "auto" (default): "process" where it
+            pays (Linux, 2 or more cores, flush_interval > 0, no live sink, not in a pool's worker).
 
     Use it as a context manager: leaving the block closes the log, with status "ok", or
     "interrupted" on KeyboardInterrupt (and SIGTERM inside :func:`handle_sigterm`), or "error"
@@ -83,9 +88,12 @@ class McapRecorder(NavigationChannels):
         compression: str = "zstd",
         model: "mujoco.MjModel | None" = None,
         live: "LiveServer | None" = None,
+        writer: str = "auto",
     ) -> None:
         if not (flush_interval >= 0 and math.isfinite(flush_interval)):
             raise ValueError(f"flush_interval = {flush_interval!r} s must be finite and >= 0")
+        self._proc: _WriterProcess | None = None
+        self._proc_wanted = process_wanted(writer, float(flush_interval), live)
         metadata = dict(metadata or {})
         self._robot = None
         if model is not None:
@@ -230,36 +238,13 @@ class McapRecorder(NavigationChannels):
         if self.params is not None:
             self._writer.add_message(self._channel(TOPIC_SCENE, "foxglove.SceneUpdate",
                                                    SCHEMAS["foxglove.SceneUpdate"]),
-                                     ns, _dumps(self._robot_scene(stamp)), ns, 0)
+                                     ns, _dumps(_paper_scene(self.params, stamp)), ns, 0)
         self._path_sent_t = ns * 1e-9
         self._path_specs = _PAPER_PATHS
         self._want_paths = self.params is not None and (
             np.shape(row.get("p_desired", ())) == (5,) or np.shape(row.get("tip_true", ())) == (2,))
         if self._want_paths:
             self._channel(TOPIC_PATHS, "foxglove.SceneUpdate", SCHEMAS["foxglove.SceneUpdate"])
-
-    def _robot_scene(self, stamp: dict) -> dict:
-        colors = {"base": _color(0.85, 0.55, 0.15, 0.9)}
-        ents = []
-        for b in self.params.bodies:
-            cube = {"pose": {"position": {"x": b.box_center[0], "y": b.box_center[1], "z": 0.0},
-                             "orientation": dict(_IDENTITY)},
-                    "size": {"x": 2 * b.box_half[0], "y": 2 * b.box_half[1], "z": b.width},
-                    "color": colors.get(b.name, _color(0.6, 0.6, 0.65, 0.9))}
-            ents.append(_entity(b.name, b.name, stamp, cubes=[cube]))
-        arrows = []
-        for th in self.params.thrusters:
-            ang = math.atan2(th.direction[1], th.direction[0])
-            arrows.append({"pose": {"position": {"x": th.position[0], "y": th.position[1], "z": 0.0},
-                                    "orientation": _quat_z(ang)},
-                           "shaft_length": 0.12, "shaft_diameter": 0.015, "head_length": 0.04,
-                           "head_diameter": 0.035, "color": _color(0.2, 0.6, 1.0)})
-        if arrows:
-            ents.append(_entity(self.params.bodies[0].name, "thrusters", stamp, arrows=arrows))
-        tip = {"pose": {"position": dict(_ZERO3), "orientation": dict(_IDENTITY)},
-               "size": {"x": 0.025, "y": 0.025, "z": 0.025}, "color": _color(1.0, 0.2, 0.2)}
-        ents.append(_entity("tip", "tip", stamp, spheres=[tip]))
-        return {"deletions": [], "entities": ents}
 
     # ---------------------------------------------------------------- writing
 
@@ -288,11 +273,21 @@ class McapRecorder(NavigationChannels):
                     self._warned.add(name)
                     warnings.warn(f"recorder: signal {name!r} first appeared after the first "
                                   "sample; it is not recorded", stacklevel=3)
-            self._pending.append((t, ns, self.samples, dict(row), same))
+            proc = self._proc
+            if proc is not None:  # the writer process's batch (uvms_mj.io.writer_process)
+                proc.add((t, dict(row), same))
+            else:
+                self._pending.append((t, ns, self.samples, dict(row), same))
             self.samples += 1
             self._last_ns = ns
             if self.samples == 1 or time.monotonic() - self._last_flush >= self.flush_interval:
-                self.flush()
+                if proc is not None:
+                    proc.send(True)
+                    self._last_flush = time.monotonic()
+                else:
+                    self.flush()
+                    if self.samples == 1 and self._proc_wanted:
+                        self._proc = _WriterProcess(self, row)
         if self._live is not None and self._live.pace(t):  # (outside the critical section: Ctrl-C ends a wait)
             with _CRITICAL:
                 self._write_pending()
@@ -495,7 +490,7 @@ class McapRecorder(NavigationChannels):
                     j = j2
                     continue
                 t, row = rows[j][0], rows[j][3]
-                xs = self._path_value(spec, row)
+                xs = _path_value(spec, row)
                 if xs is not None:
                     self._paths.setdefault(key, []).append(_point(*xs))
                     kept_t = self._path_kept_t[key] = t
@@ -504,16 +499,6 @@ class McapRecorder(NavigationChannels):
                     self._path_dirty = True
                 j += 1
 
-    @staticmethod
-    def _path_value(spec: "_PathSpec", row: Mapping[str, Any]) -> list | None:
-        v = row.get(spec.signal)
-        if v is None:
-            return None
-        i = spec.start
-        xs = (v[i:i + spec.dims].tolist() if type(v) is np.ndarray and v.dtype == np.float64
-              else [float(v[i + j]) for j in range(spec.dims)])
-        return xs if all(map(math.isfinite, xs)) else None
-
     def _settle_paths(self) -> None:
         """The strips' last points from the rows kept since each strip's last point."""
         for spec in self._path_specs:
@@ -521,7 +506,7 @@ class McapRecorder(NavigationChannels):
             if not recent:
                 continue
             for row in reversed(recent):
-                xs = self._path_value(spec, row)
+                xs = _path_value(spec, row)
                 if xs is not None:
                     self._path_last[spec.key] = xs
                     self._path_dirty = True
@@ -560,8 +545,11 @@ class McapRecorder(NavigationChannels):
         if self.closed:
             return
         with _critical():
-            self._write_pending()
-            self._writer.flush()
+            if self._proc is not None:
+                self._proc.flush()  # (waits for the writer process's flush)
+            else:
+                self._write_pending()
+                self._writer.flush()
             self._last_flush = time.monotonic()
 
     def close(self, status: str = "ok", reason: str = "", meta: Mapping[str, Any] | None = None) -> None:
@@ -571,6 +559,12 @@ class McapRecorder(NavigationChannels):
             return
         with _critical():
             self.closed = True
+            if self._proc is not None:  # the writer process closes the log
+                try:
+                    self._proc.close(status, reason, meta)
+                finally:
+                    self._file.close()
+                return
             failed = None
             try:
                 try:
