@@ -16,7 +16,7 @@ from typing import Sequence
 
 import numpy as np
 
-from uvms_mj.plant.layout import motor_torques
+from uvms_mj.plant.layout import motor_clamps, motor_torques
 from uvms_mj.plant.stepping import _finite
 
 __all__ = ["Actuation"]
@@ -35,8 +35,11 @@ class Actuation:
         if self._direct and self._thr_lagged:
             return np.minimum(np.maximum(self.data.act[self._thr_act], self._thr_lo), self._thr_hi)
         u = self.data.act[self._thr_act] if self._thr_lagged else self.data.ctrl[self._thr]
+        groups = self._groups
+        if len(groups) == 1:  # one curve for every thruster (in order)
+            return np.clip(groups[0][1](u), self._thr_lo, self._thr_hi)
         f = np.empty(u.size)
-        for ks, c, _ in self._groups:
+        for ks, c, _ in groups:
             f[ks] = c(u[ks])
         return np.clip(f, self._thr_lo, self._thr_hi)
 
@@ -50,8 +53,12 @@ class Actuation:
     def joint_torques_applied(self) -> np.ndarray:
         """The joint torques the motors apply for the held commands [N m] (:attr:`Layout.motor_names`
         order): MuJoCo's motor force after its ``ctrlrange`` / ``forcerange`` clamps, times the gear
-        (:func:`uvms_mj.plant.layout.motor_torques`; what the next step applies)."""
-        return motor_torques(self.model, self._mot, self.data.ctrl[self._mot])
+        (:func:`uvms_mj.plant.layout.motor_torques`; what the next step applies). The ranges are
+        read once after each :meth:`reset` (:func:`uvms_mj.plant.layout.motor_clamps`)."""
+        clamps = self.__dict__.get("_motor_clamps")
+        if clamps is None:
+            clamps = self._motor_clamps = motor_clamps(self.model, self._mot)
+        return motor_torques(self.model, self._mot, self.data.ctrl[self._ctrl_slices[1]], clamps)
 
     def thrust_to_ctrl(self, thrust: Sequence[float]) -> np.ndarray:
         """Actuator commands for thrusts [N] (the thrust itself for unit-gain thrusters; else
@@ -59,8 +66,11 @@ class Actuation:
         f = np.asarray(thrust, dtype=float).ravel()
         if self._direct:
             return f.copy()
+        groups = self._groups
+        if len(groups) == 1:  # one curve and range for every thruster (in order)
+            return groups[0][2](f)
         u = np.empty(f.size)
-        for ks, _, inv in self._groups:
+        for ks, _, inv in groups:
             u[ks] = inv(f[ks])
         return u
 

@@ -371,6 +371,7 @@ class Plant(Stepping, Actuation):
             raise ParameterError("reset after the payload was picked up: create a new Plant")
         self._picked = False
         self._failed: set[str] = set()
+        self.__dict__.pop("_motor_clamps", None)  # Actuation.joint_torques_applied reads the ranges again
         if not np.array_equal(m.actuator_forcerange, self._forcerange0):  # a failure happened: undo it
             m.actuator_forcerange[:] = self._forcerange0
             m.actuator_forcelimited[:] = self._forcelimited0
@@ -429,6 +430,7 @@ class Plant(Stepping, Actuation):
         self._thr_lo[k] = self._thr_hi[k] = 0.0
         self._failed.add(name)
         self.__dict__.pop("_io", None)  # the compiled sample copies the limits: rebuild it
+        self.__dict__.pop("_motor_clamps", None)
 
     def set_state(
         self,

@@ -7,6 +7,8 @@ sample), and a compiled model's curves and commands: :func:`thruster_curves`,
 
 from __future__ import annotations
 
+import bisect
+import math
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -54,6 +56,14 @@ class _Poly:
             y = np.full(u.shape, self.top)
             for c in self.rev:
                 y = y * x + c
+        return u * y if self.kind == "odd" else y
+
+    def at(self, u: float) -> float:
+        """The polynomial at one float (the same steps as :meth:`__call__`)."""
+        x = u * u if self.kind != "plain" else u
+        y = self.top
+        for c in self.rev:
+            y = y * x + c
         return u * y if self.kind == "odd" else y
 
 
@@ -365,20 +375,57 @@ class CurveInverse:
         self.der = np.polynomial.polynomial.polyder(c.coeffs) if c.kind == "poly" else None
         if c.kind == "poly":
             self._F, self._dF = _Poly(c.coeffs), _Poly(self.der)
+        # the tables as floats for :meth:`_floats` (a command vector every control sample)
+        self._Fl, self._ul = self.F.tolist(), self.u.tolist()
 
     def __call__(self, F) -> np.ndarray:
         """Commands u for thrusts F [N] (array), clamped to the reachable thrusts."""
         F = np.asarray(F, dtype=float)
+        if self._linear is None and F.ndim == 1 and F.size <= 32:
+            vals = F.tolist()
+            if math.isfinite(sum(vals)):  # every value finite: the same steps on floats
+                return np.array(self._floats(vals))
         # np.minimum / np.maximum: the same clamping as np.clip, several times cheaper on a few values
         if self._linear is not None:
             c0, c1, a, b = self._linear
             return np.minimum(np.maximum((F - c0) / c1, min(a, b)), max(a, b))
         Fc = np.minimum(np.maximum(F, self.F[0]), self.F[-1])
         u = np.interp(Fc, self.F, self.u)
-        F_of, dF_of = self._F, self._dF
+        F_of, dF_of = (self._F, self._dF) if self.newton else (None, None)  # a table: none
         for _ in range(self.newton):
             d = dF_of(u)
             step = np.zeros(u.shape)
             np.divide(F_of(u) - Fc, d, out=step, where=d != 0)  # no step where dF/du = 0
             u = np.minimum(np.maximum(u - step, self.a), self.b)
         return u
+
+    def _floats(self, vals: list) -> list:
+        """:meth:`__call__` of a few finite thrusts as Python floats, step for step the same
+        arithmetic (np.interp's: the segment j with F[j] <= x < F[j + 1], its slope, x = F[j]
+        exactly giving u[j]; the same Horner steps; the same clamps), without numpy's cost per call
+        on a handful of values."""
+        Ft, ut = self._Fl, self._ul
+        F0, F1, last = Ft[0], Ft[-1], len(Ft) - 1
+        a, b, newton = self.a, self.b, self.newton
+        F_of, dF_of = (self._F, self._dF) if newton else (None, None)
+        out = []
+        for x in vals:
+            x = min(max(x, F0), F1)
+            j = bisect.bisect_right(Ft, x) - 1
+            if j >= last:
+                u = ut[last]
+            elif Ft[j] == x:
+                u = ut[j]
+            else:
+                slope = (ut[j + 1] - ut[j]) / (Ft[j + 1] - Ft[j])
+                u = slope * (x - Ft[j]) + ut[j]
+                if u != u:  # as np.interp: from the other end of the segment
+                    u = slope * (x - Ft[j + 1]) + ut[j + 1]
+                    if u != u and ut[j] == ut[j + 1]:
+                        u = ut[j]
+            for _ in range(newton):
+                d = dF_of.at(u)
+                step = (F_of.at(u) - x) / d if d != 0 else 0.0
+                u = min(max(u - step, a), b)
+            out.append(u)
+        return out
