@@ -400,6 +400,11 @@ class Plant(Stepping, Actuation):
         except SurfaceError as exc:
             raise ParameterError(str(exc)) from None
 
+    @property
+    def has_sea_signals(self) -> bool:
+        """Whether :meth:`sea_signals` gives any signal (waves or a tether; else it is always empty)."""
+        return self.sea.on or self.tether is not None
+
     def sea_signals(self) -> dict:
         """The waves at the vehicle now (``wave_elevation``, ``wave_velocity``; empty without
         waves), for the sampled loop's log (:mod:`uvms_mj.plant.sea`); with a tether also

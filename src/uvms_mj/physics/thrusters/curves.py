@@ -407,11 +407,15 @@ class CurveInverse:
         Ft, ut = self._Fl, self._ul
         F0, F1, last = Ft[0], Ft[-1], len(Ft) - 1
         a, b, newton = self.a, self.b, self.newton
-        F_of, dF_of = (self._F, self._dF) if newton else (None, None)
+        if newton:  # _Poly.at of F and dF/du, inlined (u * u shared)
+            Fp, dp = self._F, self._dF
+            fk, ftop, frev, dk, dtop, drev = Fp.kind, Fp.top, Fp.rev, dp.kind, dp.top, dp.rev
+        search = bisect.bisect_right
         out = []
         for x in vals:
-            x = min(max(x, F0), F1)
-            j = bisect.bisect_right(Ft, x) - 1
+            x = F0 if F0 > x else x  # min(max(x, F0), F1), as np.minimum(np.maximum(...))
+            x = F1 if F1 < x else x
+            j = search(Ft, x) - 1
             if j >= last:
                 u = ut[last]
             elif Ft[j] == x:
@@ -424,8 +428,21 @@ class CurveInverse:
                     if u != u and ut[j] == ut[j + 1]:
                         u = ut[j]
             for _ in range(newton):
-                d = dF_of.at(u)
-                step = (F_of.at(u) - x) / d if d != 0 else 0.0
-                u = min(max(u - step, a), b)
+                uu = u * u
+                xv = uu if dk != "plain" else u
+                d = dtop
+                for c in drev:
+                    d = d * xv + c
+                if dk == "odd":
+                    d = u * d
+                xv = uu if fk != "plain" else u
+                y = ftop
+                for c in frev:
+                    y = y * xv + c
+                if fk == "odd":
+                    y = u * y
+                u = u - ((y - x) / d if d != 0 else 0.0)
+                u = a if a > u else u
+                u = b if b < u else u
             out.append(u)
         return out
