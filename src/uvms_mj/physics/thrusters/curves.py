@@ -70,13 +70,18 @@ class _Poly:
 _POLYS: dict[tuple, _Poly] = {}
 
 
-def _horner(coeffs, u: np.ndarray) -> np.ndarray:
-    """Evaluate the polynomial with coefficients c0..cn at u (cached :class:`_Poly`)."""
+def _poly(coeffs) -> _Poly:
+    """The cached :class:`_Poly` of the coefficients c0..cn."""
     key = tuple(coeffs)
     p = _POLYS.get(key)
     if p is None:
         p = _POLYS[key] = _Poly(key)
-    return p(u)
+    return p
+
+
+def _horner(coeffs, u: np.ndarray) -> np.ndarray:
+    """Evaluate the polynomial with coefficients c0..cn at u (cached :class:`_Poly`)."""
+    return _poly(coeffs)(u)
 
 
 @dataclass(frozen=True)
