@@ -132,6 +132,20 @@ def test_curve_inverse_matches_invert_curve():
     np.testing.assert_allclose(inv(F), invert_curve(c, F, -1.0, 1.0), atol=1e-12)
     inside = np.abs(F) < 30.0
     np.testing.assert_allclose(c(inv(F[inside])), F[inside], atol=1e-10)  # the forward curve gives F back
+    # a command vector (one per thruster, every control sample: the inverse's float path) against invert_curve
+    F8 = np.array([-29.0, -7.5, -0.3, 0.0, 0.2, 3.3, 12.0, 29.9])
+    np.testing.assert_allclose(inv(F8), invert_curve(c, F8, -1.0, 1.0), atol=1e-12)
+
+
+def test_curve_inverse_of_a_table_is_its_piecewise_linear_inverse():
+    """A table curve inverts exactly by interpolation (closed form: u = u_j + (F - F_j) (u_{j+1} - u_j) /
+    (F_{j+1} - F_j) on the segment holding F, the table's ends beyond it), for a few thrusts (the float
+    path) and for many (numpy's); 1e-12: round-off of one interpolation."""
+    inv = CurveInverse("table -1 -10 -0.1 -1 0.1 1 1 20")
+    F = np.array([-12.0, -10.0, -5.5, -1.0, 0.0, 0.5, 1.0, 10.5, 20.0, 25.0])
+    u_true = np.array([-1.0, -1.0, -0.55, -0.1, 0.0, 0.05, 0.1, 0.55, 1.0, 1.0])
+    np.testing.assert_allclose(inv(F), u_true, atol=1e-12)
+    np.testing.assert_allclose(inv(np.tile(F, 10)), np.tile(u_true, 10), atol=1e-12)
 
 
 def test_thrust_in_newtons_gives_the_allocated_wrench():

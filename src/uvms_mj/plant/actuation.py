@@ -16,10 +16,32 @@ from typing import Sequence
 
 import numpy as np
 
-from uvms_mj.plant.layout import motor_torques
+from uvms_mj.physics.thrusters.curves import _poly
+from uvms_mj.plant.layout import motor_clamps, motor_torques
 from uvms_mj.plant.stepping import _finite
 
 __all__ = ["Actuation"]
+
+
+def _clipped_poly(curve, u: list, lo: list, hi: list) -> list:
+    """np.clip(curve(u), lo, hi) of a polynomial thrust curve on floats: the same Horner steps
+    (:class:`uvms_mj.physics.thrusters.curves._Poly`) and np.clip's own comparisons (NaN kept,
+    max(x, lo) = x if x > lo else lo, then min(x, hi) = x if x < hi else hi)."""
+    p = _poly(curve.coeffs)
+    kind, top, rev = p.kind, p.top, p.rev
+    out = []
+    for v, a, b in zip(u, lo, hi):
+        x = v * v if kind != "plain" else v
+        y = top
+        for c in rev:
+            y = y * x + c
+        if kind == "odd":
+            y = v * y
+        if y == y:
+            y = y if y > a else a
+            y = y if y < b else b
+        out.append(y)
+    return out
 
 
 class Actuation:
@@ -35,8 +57,14 @@ class Actuation:
         if self._direct and self._thr_lagged:
             return np.minimum(np.maximum(self.data.act[self._thr_act], self._thr_lo), self._thr_hi)
         u = self.data.act[self._thr_act] if self._thr_lagged else self.data.ctrl[self._thr]
+        groups = self._groups
+        if len(groups) == 1:  # one curve for every thruster (in order)
+            c = groups[0][1]
+            if c.kind == "poly" and u.size <= 32:
+                return np.array(_clipped_poly(c, u.tolist(), self._thr_lo.tolist(), self._thr_hi.tolist()))
+            return np.clip(c(u), self._thr_lo, self._thr_hi)
         f = np.empty(u.size)
-        for ks, c, _ in self._groups:
+        for ks, c, _ in groups:
             f[ks] = c(u[ks])
         return np.clip(f, self._thr_lo, self._thr_hi)
 
@@ -50,8 +78,23 @@ class Actuation:
     def joint_torques_applied(self) -> np.ndarray:
         """The joint torques the motors apply for the held commands [N m] (:attr:`Layout.motor_names`
         order): MuJoCo's motor force after its ``ctrlrange`` / ``forcerange`` clamps, times the gear
-        (:func:`uvms_mj.plant.layout.motor_torques`; what the next step applies)."""
-        return motor_torques(self.model, self._mot, self.data.ctrl[self._mot])
+        (:func:`uvms_mj.plant.layout.motor_torques`; what the next step applies). The ranges are
+        read once after each :meth:`reset` (:func:`uvms_mj.plant.layout.motor_clamps`)."""
+        clamps = self.__dict__.get("_motor_clamps")
+        if clamps is None:
+            arrays = motor_clamps(self.model, self._mot)
+            clamps = self._motor_clamps = (arrays, list(zip(*(v.tolist() for v in arrays))))
+        arrays, per_motor = clamps
+        ctrl = self.data.ctrl[self._ctrl_slices[1]]
+        if len(per_motor) > 16:
+            return motor_torques(self.model, self._mot, ctrl, arrays)
+        out = []  # motor_torques' steps on floats: x if lo <= x, as np.maximum(x, lo) (and min)
+        for x, (clo, chi, gain, flo, fhi, gear) in zip(ctrl.tolist(), per_motor):
+            x = clo if clo > x else x
+            x = gain * (chi if chi < x else x)
+            x = flo if flo > x else x
+            out.append(gear * (fhi if fhi < x else x))
+        return np.array(out)
 
     def thrust_to_ctrl(self, thrust: Sequence[float]) -> np.ndarray:
         """Actuator commands for thrusts [N] (the thrust itself for unit-gain thrusters; else
@@ -59,8 +102,11 @@ class Actuation:
         f = np.asarray(thrust, dtype=float).ravel()
         if self._direct:
             return f.copy()
+        groups = self._groups
+        if len(groups) == 1:  # one curve and range for every thruster (in order)
+            return groups[0][2](f)
         u = np.empty(f.size)
-        for ks, _, inv in self._groups:
+        for ks, _, inv in groups:
             u[ks] = inv(f[ks])
         return u
 

@@ -25,7 +25,7 @@ import numpy as np
 from uvms_mj.plant.errors import ParameterError
 from uvms_mj.physics.thrusters import thruster_actuators
 
-__all__ = ["InitialState", "Layout", "motor_torque_range", "motor_torques"]
+__all__ = ["InitialState", "Layout", "motor_clamps", "motor_torque_range", "motor_torques"]
 
 
 # --------------------------------------------------------------------------- layout
@@ -197,23 +197,30 @@ def motor_torque_range(model: mujoco.MjModel, actuator_ids) -> tuple[np.ndarray,
         lo[i], hi[i] = (0.0 if math.isnan(t[0]) else t[0]), (0.0 if math.isnan(t[1]) else t[1])
     return lo, hi
 
-def motor_torques(model: mujoco.MjModel, actuator_ids, ctrl) -> np.ndarray:
+def motor_clamps(model: mujoco.MjModel, actuator_ids) -> tuple[np.ndarray, ...]:
+    """(ctrl_lo, ctrl_hi, gain, force_lo, force_hi, gear) per motor of ``actuator_ids``: what
+    :func:`motor_torques` applies, read once (-inf / +inf where a range is not limited: clamping to
+    them leaves every number as it is)."""
+    ids = np.asarray(actuator_ids, dtype=int).ravel()
+    clo, chi = np.full(ids.size, -np.inf), np.full(ids.size, np.inf)
+    flo, fhi = clo.copy(), chi.copy()
+    lim = model.actuator_ctrllimited[ids].astype(bool)
+    clo[lim], chi[lim] = model.actuator_ctrlrange[ids[lim], 0], model.actuator_ctrlrange[ids[lim], 1]
+    lim = model.actuator_forcelimited[ids].astype(bool)
+    flo[lim], fhi[lim] = model.actuator_forcerange[ids[lim], 0], model.actuator_forcerange[ids[lim], 1]
+    return clo, chi, model.actuator_gainprm[ids, 0].copy(), flo, fhi, model.actuator_gear[ids, 0].copy()
+
+
+def motor_torques(model: mujoco.MjModel, actuator_ids, ctrl, clamps: tuple | None = None) -> np.ndarray:
     """The joint torque [N m] (force [N] on a slide) each motor applies for the commands ``ctrl``
     (one per actuator of ``actuator_ids``), as MuJoCo computes a motor's force: the command
     clamped to ``ctrlrange`` (where ``ctrllimited``), times the gain, clamped to ``forcerange``
-    (where ``forcelimited``), times the gear (``data.actuator_force`` x gear after a step)."""
-    ids = np.asarray(actuator_ids, dtype=int).ravel()
+    (where ``forcelimited``), times the gear (``data.actuator_force`` x gear after a step).
+    ``clamps``: :func:`motor_clamps` of the same model and ids (read once by a plant)."""
+    clo, chi, gain, flo, fhi, gear = motor_clamps(model, actuator_ids) if clamps is None else clamps
     c = np.array(ctrl, dtype=float).ravel()
-    lim = model.actuator_ctrllimited[ids].astype(bool)
-    if lim.any():
-        r = model.actuator_ctrlrange[ids]
-        c = np.where(lim, np.minimum(np.maximum(c, r[:, 0]), r[:, 1]), c)
-    f = model.actuator_gainprm[ids, 0] * c
-    lim = model.actuator_forcelimited[ids].astype(bool)
-    if lim.any():
-        r = model.actuator_forcerange[ids]
-        f = np.where(lim, np.minimum(np.maximum(f, r[:, 0]), r[:, 1]), f)
-    return model.actuator_gear[ids, 0] * f
+    f = gain * np.minimum(np.maximum(c, clo), chi)
+    return gear * np.minimum(np.maximum(f, flo), fhi)
 
 
 # --------------------------------------------------------------------------- initial state

@@ -371,6 +371,7 @@ class Plant(Stepping, Actuation):
             raise ParameterError("reset after the payload was picked up: create a new Plant")
         self._picked = False
         self._failed: set[str] = set()
+        self.__dict__.pop("_motor_clamps", None)  # Actuation.joint_torques_applied reads the ranges again
         if not np.array_equal(m.actuator_forcerange, self._forcerange0):  # a failure happened: undo it
             m.actuator_forcerange[:] = self._forcerange0
             m.actuator_forcelimited[:] = self._forcelimited0
@@ -398,6 +399,11 @@ class Plant(Stepping, Actuation):
             self.sea.check_initial(d.qpos)
         except SurfaceError as exc:
             raise ParameterError(str(exc)) from None
+
+    @property
+    def has_sea_signals(self) -> bool:
+        """Whether :meth:`sea_signals` gives any signal (waves or a tether; else it is always empty)."""
+        return self.sea.on or self.tether is not None
 
     def sea_signals(self) -> dict:
         """The waves at the vehicle now (``wave_elevation``, ``wave_velocity``; empty without
@@ -429,6 +435,7 @@ class Plant(Stepping, Actuation):
         self._thr_lo[k] = self._thr_hi[k] = 0.0
         self._failed.add(name)
         self.__dict__.pop("_io", None)  # the compiled sample copies the limits: rebuild it
+        self.__dict__.pop("_motor_clamps", None)
 
     def set_state(
         self,

@@ -306,42 +306,62 @@ def run_closed_loop(
 
     on_event = getattr(plant, "on_sample", None)  # scheduled plant events (e.g. a payload pick-up)
     sea_signals = getattr(plant, "sea_signals", None)  # the waves at the vehicle (none without waves)
-    exact = layout is None and per_signal is None and not (noisy or quantized or sensor.velocity_sensor
-                                                          or sensor.delay)  # q = q_true
+    if sea_signals is not None and not getattr(plant, "has_sea_signals", True):
+        sea_signals = None  # a plant that says it has none (no waves, no tether): not called every sample
+    # q = q_true: no sensor model (a free vehicle's measure_robot then copies q_true and gives no qd)
+    exact = per_signal is None and not (noisy or quantized or sensor.velocity_sensor or sensor.delay)
     # the state at each sample: observed once, then read by each step (Plant.step_observe: the
     # compiled sample where it can); the thrust read after the commands where it follows them
     state = _observe(plant)
     has_applied = hasattr(plant, "joint_torques_applied")  # else (a plant without motor ranges): the command
+    # what every sample calls, looked up once
+    compute = controller.compute
+    if hasattr(plant, "command"):
+        command = plant.command
+    else:
+        def command(thrust, torques, finite=True):
+            _command(plant, thrust, torques)
+    if hasattr(plant, "step_observe"):
+        step_observe = plant.step_observe
+    else:
+        def step_observe(m):
+            return _step_observe(plant, m)
+    estimate = feedback == "estimate"
+    nav_row = None
+    isfinite, ndarray, f64 = math.isfinite, np.ndarray, np.float64
     for k in range(n):
+        t = k * T
         if on_event is not None:
-            on_event(k * T)
+            on_event(t)
         q_true, qd_true, tip_true, thr_lagged = state
-        meas = Measurement(k, k * T, q_true.copy()) if exact else measure(k, q_true, qd_true)
-        nav_row = None
-        if feedback == "estimate":
+        meas = Measurement(k, t, q_true.copy()) if exact else measure(k, q_true, qd_true)
+        if estimate:
             if est is None:
                 est = _start_estimator(navigation, nav, plant, layout, q_true, qd_true)
-            meas, nav_row = _estimated(est, meas, layout, q_true, k * T)
+            meas, nav_row = _estimated(est, meas, layout, q_true, t)
         if k == 0:
             controller.reset(meas)
-        cmd: Command = controller.compute(meas)
-        thrust = np.asarray(cmd.thrust, dtype=float)
-        torques = np.asarray(cmd.torques, dtype=float)
+        cmd: Command = compute(meas)
+        thrust, torques = cmd.thrust, cmd.torques
+        if type(thrust) is not ndarray or thrust.dtype != f64:
+            thrust = np.asarray(thrust, dtype=float)
+        if type(torques) is not ndarray or torques.dtype != f64:
+            torques = np.asarray(torques, dtype=float)
         out = thrust.ravel().tolist() + torques.ravel().tolist()
-        if not math.isfinite(sum(out)):  # also true of a sum beyond the float range: look closer
-            if not all(math.isfinite(v) for v in out):
-                status, reason = "diverged", f"controller output not finite at t = {k * T:.4f} s"
+        if not isfinite(sum(out)):  # also true of a sum beyond the float range: look closer
+            if not all(isfinite(v) for v in out):
+                status, reason = "diverged", f"controller output not finite at t = {t:.4f} s"
                 break
         big = max(map(abs, out)) if out else 0.0
         if big > COMMAND_ABS_MAX:
             status, reason = "diverged", (f"controller command {big:.3g} (N or N m) beyond {COMMAND_ABS_MAX:g} "
-                                          f"at t = {k * T:.4f} s")
+                                          f"at t = {t:.4f} s")
             break
-        _command(plant, thrust, torques)
+        command(thrust, torques, finite=True)  # checked above
         applied = plant.joint_torques_applied if has_applied else torques
         if k == 0 and warm_start:
             plant.warm_start(thrust)
-        times[k] = k * T
+        times[k] = t
         row = {**cmd.signals, "q_true": q_true, "qd_true": qd_true, "tip_true": tip_true, "q_measured": meas.q,
                "thrust_command": thrust,
                "thrust_force": thr_lagged if thr_lagged is not None and k > 0 else plant.thruster_forces,
@@ -352,14 +372,13 @@ def run_closed_loop(
             row.update(nav_row)
         rows.append(row)
         if sink is not None:
-            sink(k * T, row)
+            sink(t, row)
         if on_sample is not None:
             on_sample(k, n)
         if k == n - 1:
             break
         try:
-            state = _step_observe(plant, sub) if nav is None else nav.advance(
-                lambda m: _step_observe(plant, m), sub)
+            state = step_observe(sub) if nav is None else nav.advance(step_observe, sub)
         except DivergenceError as exc:
             status, reason = "diverged", str(exc)
             break

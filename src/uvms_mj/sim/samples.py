@@ -53,7 +53,8 @@ class SampleRecord:
             keys = self._keys
             if keys is None:
                 self._keys = dict.fromkeys(row)
-            elif len(row) != len(keys) or not keys.keys() >= row.keys():
+                self._order = list(row)
+            elif list(row) != self._order and (len(row) != len(keys) or not keys.keys() >= row.keys()):
                 self._to_rows()
                 self._rows.append(row)
                 self.k += 1

@@ -179,11 +179,17 @@ class Shifted(Trajectory):
 
     def __init__(self, base: Trajectory, offset: Any) -> None:
         self.base, self.offset = base, np.asarray(offset, dtype=float)
+        self._off = self.offset.tolist() if self.offset.ndim == 1 else None  # (position's float path)
 
     def __repr__(self) -> str:
         return f"{type(self.base).__name__} shifted by {np.round(self.offset, 6).tolist()} m"
 
     def position(self, t: Any) -> np.ndarray:
+        floats = getattr(self.base, "_eval_floats", None)  # one time: the same sums on floats
+        if floats is not None and type(t) is float and self._off is not None:
+            row = floats(t, 0)
+            if row is not None and len(row) == len(self._off):
+                return np.array([x + o for x, o in zip(row, self._off)])
         return np.asarray(self.base.position(t)) + self.offset
 
     def velocity(self, t: Any) -> np.ndarray:

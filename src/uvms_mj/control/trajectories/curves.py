@@ -72,6 +72,8 @@ class _PhaseCurve(Trajectory):
         _set(self, "_U", np.stack([u, v], axis=1))  # 3x2
         _set(self, "_n", n)
         _set(self, "_c", np.asarray(self.centre, dtype=float))
+        _set(self, "_Ul", tuple(tuple(r) for r in self._U.tolist()))  # the same numbers as floats (_eval_floats)
+        _set(self, "_cl", tuple(self._c.tolist()))
 
     @property
     def basis(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -117,21 +119,31 @@ class _PhaseCurve(Trajectory):
         """(f, f_theta, f_thetatheta) as (x, y) pairs for one angle (None: use :meth:`_f`)."""
         return None
 
+    def _eval_floats(self, t: float, order: int) -> list | None:
+        """:meth:`_eval` at one time as Python floats (the same formulas and operations: the
+        controllers' per-sample call), or None where the curve has no scalar form."""
+        if not self._axial_none:
+            return None
+        th, dth, ddth = self.theta(t)
+        fs = self._f_scalar(th)
+        if fs is None:
+            return None
+        (fx, fy), (gx, gy), (hx, hy) = fs
+        if order == 0:
+            px, py = fx, fy
+        elif order == 1:
+            px, py = gx * dth, gy * dth
+        else:
+            d2 = dth * dth
+            px, py = hx * d2 + gx * ddth, hy * d2 + gy * ddth
+        out = [a * px + b * py for a, b in self._Ul]  # [U_i0 px + U_i1 py], as U[:, 0] px + U[:, 1] py
+        return [x + c for x, c in zip(out, self._cl)] if order == 0 else out
+
     def _eval(self, t: Any, order: int) -> np.ndarray:
-        if isinstance(t, (float, int)) and not isinstance(t, bool) and self._axial_none:
-            th, dth, ddth = self.theta(float(t))
-            fs = self._f_scalar(th)
-            if fs is not None:  # the same formulas on floats (the controllers' per-sample call)
-                (fx, fy), (gx, gy), (hx, hy) = fs
-                if order == 0:
-                    px, py = fx, fy
-                elif order == 1:
-                    px, py = gx * dth, gy * dth
-                else:
-                    d2 = dth * dth
-                    px, py = hx * d2 + gx * ddth, hy * d2 + gy * ddth
-                out = self._U[:, 0] * px + self._U[:, 1] * py
-                return out + self._c if order == 0 else out
+        if isinstance(t, (float, int)) and not isinstance(t, bool):
+            row = self._eval_floats(float(t), order)
+            if row is not None:
+                return np.array(row)
         t = np.asarray(t, dtype=float)
         th, dth, ddth = self.theta(t)
         f, f1, f2 = self._f(th)

@@ -7,6 +7,8 @@ sample), and a compiled model's curves and commands: :func:`thruster_curves`,
 
 from __future__ import annotations
 
+import bisect
+import math
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -56,17 +58,30 @@ class _Poly:
                 y = y * x + c
         return u * y if self.kind == "odd" else y
 
+    def at(self, u: float) -> float:
+        """The polynomial at one float (the same steps as :meth:`__call__`)."""
+        x = u * u if self.kind != "plain" else u
+        y = self.top
+        for c in self.rev:
+            y = y * x + c
+        return u * y if self.kind == "odd" else y
+
 
 _POLYS: dict[tuple, _Poly] = {}
 
 
-def _horner(coeffs, u: np.ndarray) -> np.ndarray:
-    """Evaluate the polynomial with coefficients c0..cn at u (cached :class:`_Poly`)."""
+def _poly(coeffs) -> _Poly:
+    """The cached :class:`_Poly` of the coefficients c0..cn."""
     key = tuple(coeffs)
     p = _POLYS.get(key)
     if p is None:
         p = _POLYS[key] = _Poly(key)
-    return p(u)
+    return p
+
+
+def _horner(coeffs, u: np.ndarray) -> np.ndarray:
+    """Evaluate the polynomial with coefficients c0..cn at u (cached :class:`_Poly`)."""
+    return _poly(coeffs)(u)
 
 
 @dataclass(frozen=True)
@@ -365,20 +380,74 @@ class CurveInverse:
         self.der = np.polynomial.polynomial.polyder(c.coeffs) if c.kind == "poly" else None
         if c.kind == "poly":
             self._F, self._dF = _Poly(c.coeffs), _Poly(self.der)
+        # the tables as floats for :meth:`_floats` (a command vector every control sample)
+        self._Fl, self._ul = self.F.tolist(), self.u.tolist()
 
     def __call__(self, F) -> np.ndarray:
         """Commands u for thrusts F [N] (array), clamped to the reachable thrusts."""
         F = np.asarray(F, dtype=float)
+        if self._linear is None and F.ndim == 1 and F.size <= 32:
+            vals = F.tolist()
+            if math.isfinite(sum(vals)):  # every value finite: the same steps on floats
+                return np.array(self._floats(vals))
         # np.minimum / np.maximum: the same clamping as np.clip, several times cheaper on a few values
         if self._linear is not None:
             c0, c1, a, b = self._linear
             return np.minimum(np.maximum((F - c0) / c1, min(a, b)), max(a, b))
         Fc = np.minimum(np.maximum(F, self.F[0]), self.F[-1])
         u = np.interp(Fc, self.F, self.u)
-        F_of, dF_of = self._F, self._dF
+        F_of, dF_of = (self._F, self._dF) if self.newton else (None, None)  # a table: none
         for _ in range(self.newton):
             d = dF_of(u)
             step = np.zeros(u.shape)
             np.divide(F_of(u) - Fc, d, out=step, where=d != 0)  # no step where dF/du = 0
             u = np.minimum(np.maximum(u - step, self.a), self.b)
         return u
+
+    def _floats(self, vals: list) -> list:
+        """:meth:`__call__` of a few finite thrusts as Python floats, step for step the same
+        arithmetic (np.interp's: the segment j with F[j] <= x < F[j + 1], its slope, x = F[j]
+        exactly giving u[j]; the same Horner steps; the same clamps), without numpy's cost per call
+        on a handful of values."""
+        Ft, ut = self._Fl, self._ul
+        F0, F1, last = Ft[0], Ft[-1], len(Ft) - 1
+        a, b, newton = self.a, self.b, self.newton
+        if newton:  # _Poly.at of F and dF/du, inlined (u * u shared)
+            Fp, dp = self._F, self._dF
+            fk, ftop, frev, dk, dtop, drev = Fp.kind, Fp.top, Fp.rev, dp.kind, dp.top, dp.rev
+        search = bisect.bisect_right
+        out = []
+        for x in vals:
+            x = F0 if F0 > x else x  # min(max(x, F0), F1), as np.minimum(np.maximum(...))
+            x = F1 if F1 < x else x
+            j = search(Ft, x) - 1
+            if j >= last:
+                u = ut[last]
+            elif Ft[j] == x:
+                u = ut[j]
+            else:
+                slope = (ut[j + 1] - ut[j]) / (Ft[j + 1] - Ft[j])
+                u = slope * (x - Ft[j]) + ut[j]
+                if u != u:  # as np.interp: from the other end of the segment
+                    u = slope * (x - Ft[j + 1]) + ut[j + 1]
+                    if u != u and ut[j] == ut[j + 1]:
+                        u = ut[j]
+            for _ in range(newton):
+                uu = u * u
+                xv = uu if dk != "plain" else u
+                d = dtop
+                for c in drev:
+                    d = d * xv + c
+                if dk == "odd":
+                    d = u * d
+                xv = uu if fk != "plain" else u
+                y = ftop
+                for c in frev:
+                    y = y * xv + c
+                if fk == "odd":
+                    y = u * y
+                u = u - ((y - x) / d if d != 0 else 0.0)
+                u = a if a > u else u
+                u = b if b < u else u
+            out.append(u)
+        return out
