@@ -53,7 +53,7 @@ def plot_run(log, out_dir: str | Path, stem: str = "run") -> list[Path]:
     A robot log (``meta["robot"]``, any floating robot) gets the same two files, labelled with
     the model's own names: ``_tracking``: base position x, y, z [m] and attitude roll, pitch,
     yaw [deg] (desired vs actual when ``base_desired`` is logged), base position error [mm] and
-    attitude error [deg], joint angles [rad] vs ``joints_desired``, the end-tip error [mm] (or
+    attitude error [mrad], joint angles [rad] vs ``joints_desired``, the end-tip error [mm] (or
     position); ``_actuation``: thruster forces and commands [N], joint torques [N m], the
     controller's body-frame wrench. Panels whose signals are not logged say so.
     """
@@ -79,7 +79,7 @@ def plot_comparison(logs: Mapping[str, Any], out_path: str | Path) -> Path:
         out_path: the PNG to write (folders are created).
 
     Robot logs (all of them; :func:`plot_run`): the base position error norm [mm], the attitude
-    error angle [deg] and, when ``tip_desired`` is logged, the end-tip error norm [mm]
+    error angle [mrad] and, when ``tip_desired`` is logged, the end-tip error norm [mm]
     (:func:`robot_errors`).
     """
     if not logs:
