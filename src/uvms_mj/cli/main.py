@@ -95,6 +95,12 @@ class _Group(click.Group):
     ``UVMS_MJ_COMPILED`` (or a former switch set) is one line and exit 2."""
 
     def main(self, *args, **kwargs):  # noqa: ANN002, ANN003
+        if _CLI_PROCESS:
+            # The command's module and mujoco (which every command's compiled_mode check imports) are
+            # imported while Ctrl-C still exits 130 at once: an interrupt inside an extension's
+            # initialisation would otherwise surface as an ImportError.
+            self.get_command(None, _command_name(sys.argv[1:]) or "")
+            import uvms_mj.physics.build  # noqa: F401
         from uvms_mj.io.interrupts import cli_signals, exit_now, signalled
 
         with cli_signals(watchdog=_CLI_PROCESS):
@@ -117,10 +123,9 @@ class _Group(click.Group):
 
     def get_command(self, ctx, cmd_name: str):  # noqa: ANN001
         if cmd_name not in self.commands and cmd_name in _COMMANDS:
-            import importlib
-
             module, attr = _COMMANDS[cmd_name]
-            self.add_command(getattr(importlib.import_module(module), attr), cmd_name)
+            # (the import statement's machinery, not importlib.import_module: -X importtime reports it)
+            self.add_command(getattr(__import__(module, fromlist=[attr]), attr), cmd_name)
         return self.commands.get(cmd_name)
 
     def make_context(self, *args, **kwargs):  # noqa: ANN002, ANN003

@@ -82,7 +82,8 @@ LengthVec2 = Annotated[list[Annotated[float, Field(ge=-LENGTH_MAX, le=LENGTH_MAX
 
 
 class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False, validate_default=False)
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False, validate_default=False,
+                              defer_build=True)  # schemas built on first use: ~0.07 s of validate
 
 
 

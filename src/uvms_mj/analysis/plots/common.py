@@ -74,10 +74,10 @@ class _DecimatingAxes(Axes):
 
 #: Fixed margins of our figures [inches] (instead of matplotlib's constrained layout, which measured
 #: every text twice per save: half of a figure's time, ~0.7 s of the paper run's two). Sized for our
-#: labels at the default 10 pt: y tick labels of up to 8 characters plus the axis label on the left of
-#: each column (and on the right of a panel with a twin axis), a title above each panel, an x label
+#: labels at the default 10 pt: y tick labels of up to 9 characters ("-0.000125") plus the axis label
+#: left of each column (and right of a panel with a twin axis), a title above each panel, an x label
 #: below each row, the figure's title above all. (Our twin axes are all in the last column.)
-_MARGINS = {"left": 0.95, "right": 0.3, "right_twin": 1.0, "bottom": 0.6, "top": 0.65, "wspace": 1.05,
+_MARGINS = {"left": 1.1, "right": 0.3, "right_twin": 1.1, "bottom": 0.6, "top": 0.65, "wspace": 1.2,
             "hspace": 0.72}
 
 
