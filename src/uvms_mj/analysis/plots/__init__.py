@@ -10,6 +10,10 @@
   names (:func:`plot_run`; errors by :func:`robot_errors`: world-frame position, body-frame
   attitude rotation vector).
 
+Errors are in the metrics table's units (positions mm, attitudes mrad); absolute attitudes are drawn in
+deg, joint angles in rad. Figures have fixed margins (:data:`uvms_mj.analysis.plots.common._MARGINS`),
+not matplotlib's constrained layout: it measured every text twice per save, half of a figure's time.
+
 Errors are desired minus true: ``p_desired`` against ``q_true`` (base) and ``tip_true`` (tip).
 A log is anything with ``.t``, ``.signals`` (name -> array) and ``.meta``: a ``RunResult`` or a
 log read back from disk. Signals a controller does not produce (the pd baseline has no f_E_hat
