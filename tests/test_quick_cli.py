@@ -71,8 +71,8 @@ def _robot_log(theta_rate: float = 0.01, n: int = 201, label: str = "c"):
     theta = theta_rate * t
     bd[:, 3], bd[:, 6] = np.cos(theta / 2), np.sin(theta / 2)
     robot = {"name": "test", "layout": {"base": "vehicle"}}
-    return SimpleNamespace(t=t, signals={"q_true": q, "base_desired": bd}, meta={"robot": robot, "controller": label}), \
-        robot, theta
+    log = SimpleNamespace(t=t, signals={"q_true": q, "base_desired": bd}, meta={"robot": robot, "controller": label})
+    return log, robot, theta
 
 
 def _panel(fig, title_start: str):
