@@ -7,7 +7,6 @@ import sys
 from pathlib import Path
 
 import click
-import numpy as np
 
 # scenarios_dir, packaged_scenarios: importable from here as before
 from uvms_mj.scenario.packaged import packaged_scenarios, resolve_scenario, scenarios_dir  # noqa: F401
@@ -44,15 +43,19 @@ def metrics_table(results: dict[str, dict[str, float]], status: dict[str, str] |
     (controller -> "ok", "diverged"...), a status row first."""
     names = list(results)
     ratio = len(names) == 2
-    lines = [f"{'metric':<28}" + "".join(f"{n:>12}" for n in names) + (f"{'ratio':>9}" if ratio else "")]
+    # each column at least 2 characters wider than its controller's name (and its status): columns
+    # never run together, and the table splits on whitespace
+    width = [max(12, len(str(n)) + 2, len(str((status or {}).get(n, ""))) + 2) for n in names]
+    lines = [f"{'metric':<28}" + "".join(f"{n:>{w}}" for n, w in zip(names, width))
+             + (f"{'ratio':>9}" if ratio else "")]
     if status is not None:
-        lines.append(f"{'status':<28}" + "".join(f"{status.get(n, '?'):>12}" for n in names))
+        lines.append(f"{'status':<28}" + "".join(f"{status.get(n, '?'):>{w}}" for n, w in zip(names, width)))
     for key, label in METRIC_LABELS.items():
         vals = [results[n].get(key, float("nan")) for n in names]
         if key in _OPTIONAL_ROWS and all(v != v for v in vals):
             continue
         # "-": a metric a run does not have (NaN), a ratio that is not defined (0 / 0, NaN)
-        line = f"{label:<28}" + "".join(f"{v:>12.4g}" if v == v else f"{'-':>12}" for v in vals)
+        line = f"{label:<28}" + "".join(f"{v:>{w}.4g}" if v == v else f"{'-':>{w}}" for v, w in zip(vals, width))
         if ratio:
             r = (vals[1] / vals[0]) if vals[0] else float("nan")
             line += f"{r:>9.2f}" if r == r else f"{'-':>9}"
@@ -125,6 +128,8 @@ def _write_json(data: dict, dest: str) -> None:
     """JSON to stdout ("-") or to a file; NaN and infinities become null."""
     import json
     import math
+
+    import numpy as np
 
     def clean(x):
         if isinstance(x, float) and not math.isfinite(x):

@@ -33,6 +33,16 @@ def _exit_130(*_) -> None:
     os._exit(130)
 
 
+#: Commands that never render (nor start a process that does): the command line's own process imports
+#: mujoco for them with rendering disabled (``MUJOCO_GL=disable`` unless the user set it).
+_NEVER_RENDER = frozenset({"validate", "info", "export"})
+
+
+def _command_name(argv: list[str]) -> str | None:
+    """The subcommand of a command line (its first argument that is not an option), or None."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
 #: This process is the command line's own (``python -m uvms_mj.cli.main`` or the installed
 #: ``uvms-mj``), never a module that imports this one (a test runner): only then are signals
 #: handled from the start and the watchdog of :func:`uvms_mj.io.interrupts.cli_signals` armed.
@@ -45,22 +55,34 @@ if _CLI_PROCESS:
     # backend before mujoco is imported (no GLFW probe; its children, e.g. sweep workers, inherit it).
     signal.signal(signal.SIGINT, _exit_130)
     signal.signal(signal.SIGTERM, _exit_130)
-    from uvms_mj.analysis.render_gl import configure_gl
+    if _command_name(sys.argv[1:]) in _NEVER_RENDER:
+        # validate, info, export never render: mujoco is imported without an OpenGL backend (no PyOpenGL
+        # import, no EGL/OSMesa library probe: ~0.05 s of validate's start-up); a user's MUJOCO_GL is kept.
+        os.environ.setdefault("MUJOCO_GL", "disable")
+    else:
+        from uvms_mj.analysis.render_gl import configure_gl
 
-    configure_gl()
+        configure_gl()
 
 import click  # noqa: E402
 
 from uvms_mj import __version__  # noqa: E402
-# The group and its options live here; each command in the module of its kind; what they share in
-# cli.common (re-exported here: the exit codes, metrics_table, the packaged scenarios).
-from uvms_mj.cli.common import (EXIT_DIVERGED, EXIT_INTERRUPTED, EXIT_IO, EXIT_RENDER,  # noqa: F401
+# The group and its options live here; each command in the module of its kind, imported when the command
+# is looked up (a command line imports only its own command's module: ``validate`` no sweep, no sim2real);
+# what they share in cli.common (re-exported here: the exit codes, metrics_table, the packaged scenarios).
+from uvms_mj.cli.common import (EXIT_DIVERGED, EXIT_INTERRUPTED, EXIT_IO, EXIT_RENDER,  # noqa: F401,E402
                                 _interrupted, metrics_table, packaged_scenarios, scenarios_dir)
-from uvms_mj.cli.logs import export, info, plot, render
-from uvms_mj.cli.plant import drift, paper, view
-from uvms_mj.cli.run import compare, run_cmd, validate
-from uvms_mj.cli.sim2real import identify_cmd, sim2real
-from uvms_mj.cli.study import sweep
+
+#: Command name -> (module, attribute) of its click command.
+_COMMANDS = {
+    "run": ("uvms_mj.cli.run", "run_cmd"), "compare": ("uvms_mj.cli.run", "compare"),
+    "validate": ("uvms_mj.cli.run", "validate"), "render": ("uvms_mj.cli.logs", "render"),
+    "plot": ("uvms_mj.cli.logs", "plot"), "info": ("uvms_mj.cli.logs", "info"),
+    "export": ("uvms_mj.cli.logs", "export"), "sweep": ("uvms_mj.cli.study", "sweep"),
+    "paper": ("uvms_mj.cli.plant", "paper"), "drift": ("uvms_mj.cli.plant", "drift"),
+    "view": ("uvms_mj.cli.plant", "view"), "sim2real": ("uvms_mj.cli.sim2real", "sim2real"),
+    "identify": ("uvms_mj.cli.sim2real", "identify_cmd"),
+}
 
 
 class _Group(click.Group):
@@ -73,6 +95,12 @@ class _Group(click.Group):
     ``UVMS_MJ_COMPILED`` (or a former switch set) is one line and exit 2."""
 
     def main(self, *args, **kwargs):  # noqa: ANN002, ANN003
+        if _CLI_PROCESS:
+            # The command's module and mujoco (which every command's compiled_mode check imports) are
+            # imported while Ctrl-C still exits 130 at once: an interrupt inside an extension's
+            # initialisation would otherwise surface as an ImportError.
+            self.get_command(None, _command_name(sys.argv[1:]) or "")
+            import uvms_mj.physics.build  # noqa: F401
         from uvms_mj.io.interrupts import cli_signals, exit_now, signalled
 
         with cli_signals(watchdog=_CLI_PROCESS):
@@ -89,6 +117,16 @@ class _Group(click.Group):
             if signalled():
                 _interrupted()  # standalone_mode=False: the command returned after the signal
             return rv
+
+    def list_commands(self, ctx):  # noqa: ANN001
+        return sorted({*_COMMANDS, *self.commands})
+
+    def get_command(self, ctx, cmd_name: str):  # noqa: ANN001
+        if cmd_name not in self.commands and cmd_name in _COMMANDS:
+            module, attr = _COMMANDS[cmd_name]
+            # (the import statement's machinery, not importlib.import_module: -X importtime reports it)
+            self.add_command(getattr(__import__(module, fromlist=[attr]), attr), cmd_name)
+        return self.commands.get(cmd_name)
 
     def make_context(self, *args, **kwargs):  # noqa: ANN002, ANN003
         try:
@@ -119,10 +157,6 @@ def main() -> None:
     and videos; compare controllers; inspect logs.
     """
 
-
-for _command in (run_cmd, compare, validate, render, plot, info, export, sweep, paper, drift, view, sim2real,
-                 identify_cmd):
-    main.add_command(_command)
 
 if __name__ == "__main__":
     main()

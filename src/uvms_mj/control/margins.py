@@ -38,6 +38,7 @@ docs/paper-reading.md "Gains and delay" compares its numbers with simulation.
 
 from __future__ import annotations
 
+import functools
 import math
 
 import numpy as np
@@ -150,6 +151,7 @@ def spectral_radius(A: np.ndarray) -> float:
     return float(np.max(np.abs(np.linalg.eigvals(A))))
 
 
+@functools.lru_cache(maxsize=256)  # a pure function of its numbers: validate creates a RAC up to 3 times
 def largest_stable_gain(T: float, delay: int = 0, tau: float = 0.0, observer: bool = False, tf: float = 10.0,
                         compensation: int = 0, plant: str = "zoh", ratio: float = 1.0, tol: float = GAIN_TOL,
                         hi: float = 1.0, plant_gain: float = 1.0) -> float:

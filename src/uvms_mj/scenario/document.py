@@ -184,6 +184,17 @@ def _nominal(robot: str, base_dir: str | None, tip_site: str | None):
     return _NOMINALS[key]
 
 
+def _works_on(name: str, robot: str) -> bool | None:
+    """Whether controller ``name`` works on ``robot`` (as :func:`controllers_for` decides), None if no
+    controller has that name. A built-in's answer needs no entry-point scan (importlib.metadata, tens of
+    ms of validate's time): only the messages that list the controllers do."""
+    try:
+        f = _factory(name)
+    except Exception:  # noqa: BLE001 - unknown, or a broken plug-in (not offered by controllers_for)
+        return None
+    return robot == "paper" or getattr(f, "robots", "paper") in ("floating", "any")
+
+
 def controllers_for(robot: str) -> list[str]:
     """The registered controllers that work on ``robot``: every one on the paper's robot; on
     others those whose class says ``robots = "floating"`` or ``"any"``."""
@@ -485,12 +496,13 @@ def _controllers_issues(controllers: dict, robot: str, nominal) -> list:
     from uvms_mj.control.registry import unknown_message
 
     issues = []
-    allowed = controllers_for(robot)
     where = "the paper's robot" if robot == "paper" else "floating robots"
     for name, params in controllers.items():
-        if name not in available():
+        works = _works_on(name, robot)
+        if works is None and name not in available():
             issues.append(((name,), unknown_message(name).replace(f"controller {name!r}", "controller", 1), _NO_VALUE))
-        elif name not in allowed:
+        elif not (works or (works is None and name in controllers_for(robot))):
+            allowed = controllers_for(robot)
             issues.append(((name,), f"not a controller for {where}{_suggest(name, allowed)}; for {where}: "
                            f"{', '.join(allowed)}", _NO_VALUE))
         elif not isinstance(params, dict):
@@ -504,13 +516,17 @@ def _controller_section_issues(c: ControllerSection, robot: str, nominal) -> lis
     """The controller section (paths below it): a controller for this robot, its parameters."""
     from uvms_mj.control.registry import RETIRED, unknown_message
 
-    allowed = controllers_for(robot)
     where = "the paper's robot" if robot == "paper" else "floating robots"
-    if c.name not in available():
-        return [(("name",), unknown_message(c.name) if c.name in RETIRED or robot == "paper"
-                 else f"unknown controller{_suggest(c.name, available())}; for {where}: {', '.join(allowed)}", c.name)]
-    if c.name not in allowed:
-        return [(("name",), f"works on the paper robot only; for {where}: {', '.join(allowed)}", c.name)]
+    works = _works_on(c.name, robot)
+    if works is None:  # not a working controller: the registry's full answer (entry points included)
+        if c.name not in available():
+            return [(("name",), unknown_message(c.name) if c.name in RETIRED or robot == "paper"
+                     else f"unknown controller{_suggest(c.name, available())}; for {where}: "
+                     f"{', '.join(controllers_for(robot))}", c.name)]
+        works = c.name in controllers_for(robot)
+    if not works:
+        return [(("name",), f"works on the paper robot only; for {where}: {', '.join(controllers_for(robot))}",
+                 c.name)]
     issues = []
     if nominal is not None:
         issues += [(("params",) + p, msg, v) for p, msg, v in check_controller_params(c.name, c.params, nominal)]

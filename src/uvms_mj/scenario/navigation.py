@@ -127,11 +127,11 @@ def _config(kind: str, sec):
 def nav_config(sc):
     """The scenario's :class:`uvms_mj.sim.navsensors.NavigationConfig`, or None (no navigation
     section and no seabed)."""
-    from uvms_mj.sim.navsensors import NAV_SENSORS, NavigationConfig
-
     nav, seabed = sc.navigation, sc.plant.seabed_depth
     if nav is None and seabed is None:
         return None
+    from uvms_mj.sim.navsensors import NAV_SENSORS, NavigationConfig
+
     parts = {k: _config(k, getattr(nav, k)) for k in NAV_SENSORS if nav is not None and getattr(nav, k) is not None}
     return NavigationConfig(**parts, seabed_depth=seabed)
 
@@ -174,8 +174,6 @@ def navigation_issues(sc, m: mujoco.MjModel, dt: float) -> list:
     """Problems of the navigation section and ``plant.seabed_depth`` on the robot's model ``m``
     at the plant step ``dt`` [s]: a planar robot, missing sites, rates that are not whole numbers
     of steps, a DVL without a scene to hit."""
-    from uvms_mj.sim.navsensors import NAV_SENSORS, _site_of, steps_of
-
     nav = sc.navigation
     issues: list = []
     free = any(int(t) == mujoco.mjtJoint.mjJNT_FREE for t in m.jnt_type)
@@ -196,6 +194,8 @@ def navigation_issues(sc, m: mujoco.MjModel, dt: float) -> list:
                        "source (fix or depth) for the ESKF; give them or use feedback: truth", fb))
     if nav is None:
         return issues
+    from uvms_mj.sim.navsensors import NAV_SENSORS, _site_of, steps_of  # (here: only a navigation section needs it)
+
     sites = [mujoco.mj_id2name(m, mujoco.mjtObj.mjOBJ_SITE, i) or "" for i in range(m.nsite)]
     for kind in NAV_SENSORS:
         sec = getattr(nav, kind)

@@ -55,7 +55,8 @@ class TrajectorySection(_Section):
     """The end-effector's desired path (module docstring): a trajectory kind's keys, ``origin``,
     and for a ``line`` the paper's ``target`` / ``displacement`` alternatives."""
 
-    model_config = ConfigDict(extra="allow", strict=True, allow_inf_nan=False, validate_default=False)
+    model_config = ConfigDict(extra="allow", strict=True, allow_inf_nan=False, validate_default=False,
+                              defer_build=True)
 
     kind: str = Field("line", description="line | waypoints | circle | lemniscate | helix | csv "
                       "(uvms_mj.control.trajectories.KINDS); the kind's own keys beside it")

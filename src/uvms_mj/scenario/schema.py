@@ -21,7 +21,7 @@ import copy
 import inspect
 import re
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import TYPE_CHECKING, Any, Callable, Sequence
 
 import mujoco
 import numpy as np
@@ -30,7 +30,6 @@ from pydantic import BaseModel, ValidationError
 
 from uvms_mj.control import ControllerError, create
 from uvms_mj.physics.terms import HydroTerms
-from uvms_mj.sim.loop import RunResult, run_closed_loop
 from uvms_mj.control.nominal import NominalRobot
 from uvms_mj.plant.params import (
     ParameterError,
@@ -43,7 +42,8 @@ from uvms_mj.plant.plant import Plant
 from uvms_mj.scenario.paths import tip_path
 from uvms_mj.scenario.sections import vehicle_params
 from uvms_mj.scenario.navigation import nav_config, resolved_navigation
-from uvms_mj.sim.navsensors import add_to_spec
+if TYPE_CHECKING:  # imported where used: validate needs neither the loop nor the navigation sensors
+    from uvms_mj.sim.loop import RunResult
 from uvms_mj.scenario.base import (  # noqa: F401  (LAG_STABILITY, log_path, sensor_model: importable from here as before)
     _NO_VALUE,
     LAG_STABILITY,
@@ -428,6 +428,12 @@ def resolved(scenario: Scenario) -> dict:
     return _jsonable(d)
 
 
+def _add_to_spec(nav):
+    from uvms_mj.sim.navsensors import add_to_spec
+
+    return add_to_spec(nav)
+
+
 def build(scenario: Scenario) -> tuple[Plant, Any]:
     """The plant (truth) and the controller of a scenario, for any robot.
 
@@ -456,7 +462,7 @@ def build(scenario: Scenario) -> tuple[Plant, Any]:
             tip_site=sc.tip_site,
             failures=[f.failure() for f in th.failures],
             payload=pl.payload.payload() if pl.payload is not None else None,
-            spec_edits=[add_to_spec(nav)] if (nav := nav_config(sc)) is not None else (),
+            spec_edits=[_add_to_spec(nav)] if (nav := nav_config(sc)) is not None else (),
             tether=pl.tether.tether() if pl.tether is not None else None,
         )
         robot = nominal_robot(sc)
@@ -526,6 +532,8 @@ def run_scenario(
     ``scenario`` (:func:`resolved`), ``name`` and ``backend``. ``built``: the (plant,
     controller) of :func:`build` if the caller built them already (fresh, never run).
     ``nav_sink``: receives the navigation samples (:func:`uvms_mj.sim.loop.run_closed_loop`)."""
+    from uvms_mj.sim.loop import run_closed_loop
+
     plant, ctrl = built if built is not None else build(scenario)
     sensor = sensor_model(scenario)
     T = float(getattr(ctrl, "T", controller_period(scenario)))

@@ -10,6 +10,10 @@
   names (:func:`plot_run`; errors by :func:`robot_errors`: world-frame position, body-frame
   attitude rotation vector).
 
+Errors are in the metrics table's units (positions mm, attitudes mrad); absolute attitudes are drawn in
+deg, joint angles in rad. Figures have fixed margins (:data:`uvms_mj.analysis.plots.common._MARGINS`),
+not matplotlib's constrained layout: it measured every text twice per save, half of a figure's time.
+
 Errors are desired minus true: ``p_desired`` against ``q_true`` (base) and ``tip_true`` (tip).
 A log is anything with ``.t``, ``.signals`` (name -> array) and ``.meta``: a ``RunResult`` or a
 log read back from disk. Signals a controller does not produce (the pd baseline has no f_E_hat
@@ -53,7 +57,7 @@ def plot_run(log, out_dir: str | Path, stem: str = "run") -> list[Path]:
     A robot log (``meta["robot"]``, any floating robot) gets the same two files, labelled with
     the model's own names: ``_tracking``: base position x, y, z [m] and attitude roll, pitch,
     yaw [deg] (desired vs actual when ``base_desired`` is logged), base position error [mm] and
-    attitude error [deg], joint angles [rad] vs ``joints_desired``, the end-tip error [mm] (or
+    attitude error [mrad], joint angles [rad] vs ``joints_desired``, the end-tip error [mm] (or
     position); ``_actuation``: thruster forces and commands [N], joint torques [N m], the
     controller's body-frame wrench. Panels whose signals are not logged say so.
     """
@@ -79,7 +83,7 @@ def plot_comparison(logs: Mapping[str, Any], out_path: str | Path) -> Path:
         out_path: the PNG to write (folders are created).
 
     Robot logs (all of them; :func:`plot_run`): the base position error norm [mm], the attitude
-    error angle [deg] and, when ``tip_desired`` is logged, the end-tip error norm [mm]
+    error angle [mrad] and, when ``tip_desired`` is logged, the end-tip error norm [mm]
     (:func:`robot_errors`).
     """
     if not logs:

@@ -151,10 +151,11 @@ def _robot_tracking_figure(log, robot: Mapping[str, Any], title: str) -> Figure:
 
     a = ax[1, 1]
     if "att" in e:
-        _error_lines(a, t, e["att"], 180 / np.pi, "deg", [r"$e_{\theta x}$", r"$e_{\theta y}$", r"$e_{\theta z}$"])
+        # mrad, the metrics table's unit for attitude errors (base_att_rms_mrad)
+        _error_lines(a, t, e["att"], 1e3, "mrad", [r"$e_{\theta x}$", r"$e_{\theta y}$", r"$e_{\theta z}$"])
     else:
         _missing(a, "not logged (no base_desired / e_attitude)")
-    _finish(a, "error [deg]", "(d) attitude error (rotation vector, body frame)")
+    _finish(a, "error [mrad]", "(d) attitude error (rotation vector, body frame)")
 
     a = ax[2, 0]
     jd = _sig(log, "joints_desired")
@@ -297,7 +298,7 @@ def _plot_robot_comparison(logs: Mapping[str, Any], out_path: Path) -> Path:
     ax = ax[:, 0]
     fig.suptitle("controller comparison: tracking errors (desired - true)", fontsize=13)
     panels: list[list[tuple[str, str, np.ndarray, np.ndarray]]] = [[], [], []]
-    scale = (1e3, 180 / np.pi, 1e3)
+    scale = (1e3, 1e3, 1e3)  # mm, mrad, mm: the metrics table's units
     t_lo, t_hi = np.inf, -np.inf
     for k, (label, log) in enumerate(logs.items()):
         t = np.asarray(log.t, dtype=float)
@@ -310,7 +311,7 @@ def _plot_robot_comparison(logs: Mapping[str, Any], out_path: Path) -> Path:
     for a, series, title, unit in zip(ax, panels, ("(a) base position error norm, world frame",
                                                    "(b) attitude error angle (rotation vector norm)",
                                                    "(c) end-tip position error norm, world frame"),
-                                      ("mm", "deg", "mm")):
+                                      ("mm", "mrad", "mm")):
         have = {s[0] for s in series}
         _norm_panel(a, series, title, unit, [label for label in logs if label not in have])
         if t_hi > t_lo:
