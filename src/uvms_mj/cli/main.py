@@ -55,7 +55,7 @@ from uvms_mj import __version__  # noqa: E402
 # The group and its options live here; each command in the module of its kind; what they share in
 # cli.common (re-exported here: the exit codes, metrics_table, the packaged scenarios).
 from uvms_mj.cli.common import (EXIT_DIVERGED, EXIT_INTERRUPTED, EXIT_IO, EXIT_RENDER,  # noqa: F401
-                                _interrupted, metrics_table, packaged_scenarios, scenarios_dir)
+                                _interrupted, metrics_table, packaged_scenarios, scenarios_dir, short_usage_error)
 from uvms_mj.cli.logs import export, info, plot, render
 from uvms_mj.cli.plant import drift, paper, view
 from uvms_mj.cli.run import compare, run_cmd, validate
@@ -108,6 +108,8 @@ class _Group(click.Group):
             return super().invoke(ctx)
         except KeyboardInterrupt:
             _interrupted()
+        except click.UsageError as exc:  # one "Error:" line and the help hint (not click's usage block)
+            short_usage_error(exc)
 
 
 @click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})
