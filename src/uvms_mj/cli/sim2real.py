@@ -64,12 +64,23 @@ def _load(data_dir: str, model: str, overrides: str | None, names, neutral: bool
     from uvms_mj.physics import ModelError
     from uvms_mj.analysis.sim2real import OverrideError, build_model, load_overrides, model_path
     from uvms_mj.analysis.trials import load_trials
+    from uvms_mj.io.paths import InputFileError, check_input_file
 
     folder = _trial_dir(data_dir)
-    if not model_path(model).is_file():
+    mp = model_path(model)
+    if mp.exists() and not mp.is_file():
+        raise click.UsageError(f"--model: {mp}: not a regular file; give an MJCF file or a name in models/")
+    if not mp.is_file():
         raise click.UsageError(f"--model: no model {model!r} (a file, or a name in models/: {model_path(model)})")
     try:
+        if overrides:  # a FIFO or /dev/zero would block or never end
+            check_input_file(overrides, "an overrides file (YAML)", max_bytes=1_000_000)
         over = load_overrides(overrides) if overrides else {}
+    except InputFileError as exc:
+        raise click.UsageError(f"--overrides: {exc}") from None
+    except OverrideError as exc:
+        raise click.UsageError(str(exc)) from None
+    try:
         m = build_model(model, over, neutral=neutral)
     except (OverrideError, ModelError) as exc:
         raise click.UsageError(str(exc)) from None
