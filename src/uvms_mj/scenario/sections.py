@@ -21,7 +21,8 @@ from uvms_mj.plant.layout import InitialState
 from uvms_mj.plant.plant import ThrusterFailure
 from uvms_mj.rotations import quat_from_rpy
 from uvms_mj.scenario.base import _NO_VALUE as _NO
-from uvms_mj.scenario.base import CURRENT_MAX, DURATION_MAX, FORCE_MAX, SEED_MAX, TAU_MAX, Hydro, _Issues, _Section
+from uvms_mj.scenario.base import (CURRENT_MAX, DURATION_MAX, FORCE_MAX, PARAM_ABS_MAX, SEED_MAX, SIZE_MIN, TAU_MAX, Hydro,
+                                   _Issues, _Section)
 
 __all__ = ["CurrentSection", "Failure", "Initial", "Orientation", "PayloadSection", "PlantSection", "Setpoint",
            "TetherSection", "ThrustersSection", "Vehicle", "WavesSection"]
@@ -38,8 +39,9 @@ Cur3 = Annotated[list[Annotated[float, Field(ge=-CURRENT_MAX, le=CURRENT_MAX)]],
 class Orientation(_Section):
     """The vehicle's initial orientation: a quaternion or roll/pitch/yaw (not both)."""
 
-    quat: Annotated[list[float], Field(min_length=4, max_length=4)] | None = Field(
-        None, description="[w, x, y, z], normalised")
+    quat: Annotated[list[Annotated[float, Field(ge=-PARAM_ABS_MAX, le=PARAM_ABS_MAX)]],
+                    Field(min_length=4, max_length=4)] | None = Field(
+        None, description="[w, x, y, z], normalised (components within +-1e6: 1e308 overflowed the norm)")
     rpy: Annotated[list[Annotated[float, Field(ge=-720, le=720)]], Field(min_length=3, max_length=3)] | None = Field(
         None, description="roll, pitch, yaw in initial.angle_unit (z-y-x convention)")
 
@@ -194,13 +196,19 @@ class PayloadSection(_Section):
     """A payload picked up during the run (:class:`uvms_mj.plant.robot.Payload`), unknown to the
     nominal model."""
 
-    mass: float = Field(gt=0, le=1000.0, description="[kg]")
+    mass: float = Field(ge=SIZE_MIN, le=1000.0, description="[kg] (at least 1e-9: smaller is no payload)")
     t: float = Field(0.0, ge=0, le=DURATION_MAX, description="pick-up time [s]")
     site: str | None = Field(None, min_length=1, description="site it is welded to; null: the tip site")
-    offset: Annotated[list[float], Field(min_length=3, max_length=3)] = Field(
-        default_factory=lambda: [0.0, 0.0, 0.0], description="centre in the site frame [m]")
-    radius: float = Field(0.02, gt=0, le=1.0, description="for its inertia (solid sphere) [m]")
-    volume: float = Field(0.0, ge=0, le=1.0, description="displaced volume [m^3]")
+    radius: float = Field(0.02, ge=SIZE_MIN, le=1.0, description="for its inertia (solid sphere) [m]")
+    volume: float = Field(0.0, ge=0, le=1.0, description="displaced volume [m^3]: 0, or at least 1e-9")
+    offset: Annotated[list[Annotated[float, Field(ge=-1.0, le=1.0)]], Field(min_length=3, max_length=3)] = Field(
+        default_factory=lambda: [0.0, 0.0, 0.0], description="centre in the site frame [m], within +-1 m")
+
+    @model_validator(mode="after")
+    def _volume(self) -> "PayloadSection":
+        if 0 < self.volume < SIZE_MIN:
+            raise _Issues([(("volume",), f"must be 0 or at least {SIZE_MIN:g} m^3", self.volume)])
+        return self
 
     def payload(self):
         from uvms_mj.plant.robot import Payload
