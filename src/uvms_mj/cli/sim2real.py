@@ -88,6 +88,13 @@ def _load(data_dir: str, model: str, overrides: str | None, names, neutral: bool
         ts = load_trials(folder, model=m, names=names)
     except (FileNotFoundError, KeyError, ValueError) as exc:
         raise click.UsageError(str(exc).strip("'\"")) from None
+    def why(name):
+        return "; ".join((f"{i.file.name}{'' if i.line is None else f':{i.line}'}: " if i.file else "") + i.message
+                         for i in ts.skipped[name])
+
+    if not len(ts):  # exit 2 with one line: every trial and why it was skipped
+        raise click.UsageError(f"no usable trial in {folder}" + (": " + "; ".join(
+            f"{n} skipped ({why(n)})" for n in ts.skipped) if ts.skipped else ""))
     for issue in ts.issues:
         if issue.severity == "error":
             click.echo(str(issue), err=True)
@@ -102,11 +109,7 @@ def _load(data_dir: str, model: str, overrides: str | None, names, neutral: bool
         if rest:
             echo(f"{rest} other warning(s) while reading (mocap gaps, missing metadata...; listed in the JSON)")
     for name in ts.skipped:
-        click.echo(f"skipped trial {name}: " + "; ".join(
-            (f"{i.file.name}{'' if i.line is None else f':{i.line}'}: " if i.file else "") + i.message
-            for i in ts.skipped[name]), err=True)
-    if not len(ts):
-        raise click.UsageError(f"no usable trial in {folder}" + (f" (skipped: {', '.join(ts.skipped)})" if ts.skipped else ""))
+        click.echo(f"skipped trial {name}: {why(name)}", err=True)
     return m, over, ts
 
 
