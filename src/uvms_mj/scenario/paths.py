@@ -23,6 +23,7 @@ from pydantic import ConfigDict, Field, model_serializer, model_validator
 from uvms_mj.scenario.base import (
     _NO_VALUE,
     ACCEL_MAX,
+    ANGLE_MAX,
     DURATION_MAX,
     LENGTH_MAX,
     PARAM_ABS_MAX,
@@ -172,7 +173,8 @@ def tip_path(section: TrajectorySection | None, tip0, base_dir: str | None = Non
 
 class Waypoint(_Section):
     t: float = Field(gt=0, le=DURATION_MAX, description="[s]")
-    joints: dict[str, float] = Field(description="joint name -> angle [arm.angle_unit]")
+    joints: dict[str, Annotated[float, Field(ge=-ANGLE_MAX, le=ANGLE_MAX)]] = Field(
+        description="joint name -> angle [arm.angle_unit], within +-720")
 
 
 class Arm(_Section):

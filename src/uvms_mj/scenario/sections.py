@@ -21,8 +21,8 @@ from uvms_mj.plant.layout import InitialState
 from uvms_mj.plant.plant import ThrusterFailure
 from uvms_mj.rotations import quat_from_rpy
 from uvms_mj.scenario.base import _NO_VALUE as _NO
-from uvms_mj.scenario.base import (CURRENT_MAX, DURATION_MAX, FORCE_MAX, PARAM_ABS_MAX, SEED_MAX, SIZE_MIN, TAU_MAX, Hydro,
-                                   _Issues, _Section)
+from uvms_mj.scenario.base import (ANGLE_MAX, ANGULAR_SPEED_MAX, CURRENT_MAX, DURATION_MAX, FORCE_MAX, PARAM_ABS_MAX,
+                                   SEED_MAX, SIZE_MIN, TAU_MAX, Hydro, _Issues, _Section)
 
 __all__ = ["CurrentSection", "Failure", "Initial", "Orientation", "PayloadSection", "PlantSection", "Setpoint",
            "TetherSection", "ThrustersSection", "Vehicle", "WavesSection"]
@@ -62,11 +62,13 @@ class Initial(_Section):
     keyframe: str | None = Field(None, description="a model keyframe to start from")
     position: Vec3 | None = Field(None, description="vehicle origin, world [m]")
     orientation: Orientation | None = None
-    joints: dict[str, float] = Field(default_factory=dict, description="joint name -> angle [angle_unit]")
+    joints: dict[str, Annotated[float, Field(ge=-ANGLE_MAX, le=ANGLE_MAX)]] = Field(
+        default_factory=dict, description="joint name -> angle [angle_unit], within +-720")
     angle_unit: Literal["deg", "rad"] = Field("deg", description="unit of rpy, joints and joint_velocities")
     linear_velocity: Vel3 | None = Field(None, description="world [m/s]")
     angular_velocity: Vel3 | None = Field(None, description="body frame [rad/s]")
-    joint_velocities: dict[str, float] = Field(default_factory=dict, description="joint name -> [angle_unit/s]")
+    joint_velocities: dict[str, Annotated[float, Field(ge=-ANGULAR_SPEED_MAX, le=ANGULAR_SPEED_MAX)]] = Field(
+        default_factory=dict, description="joint name -> [angle_unit/s], within +-3600")
 
     def state(self) -> InitialState:
         """As :class:`uvms_mj.plant.layout.InitialState` (radians)."""
