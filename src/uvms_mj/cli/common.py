@@ -87,13 +87,21 @@ def _io_error(path, exc: OSError) -> None:
 ERROR_LINE_MAX = 2000
 
 
+def _short_word(word: str, limit: int = 200) -> str:
+    """A word (no spaces) longer than ``limit``, e.g. a --set value of 3000 digits, as its start and end."""
+    if len(word) <= limit:
+        return word
+    return f"{word[:100]}...({len(word) - 140} characters)...{word[-40:]}"
+
+
 def short_usage_error(exc: click.UsageError) -> None:
     """Print a usage error (exit 2) as at most two lines, then exit: ``Error: ...`` (its message on one line,
     the lines of a multi-line message joined by "; ") and the help hint -- not click's usage block."""
-    lines = [" ".join(ln.split()) for ln in exc.format_message().splitlines()]
+    lines = [" ".join(_short_word(w) for w in ln.split()) for ln in exc.format_message().splitlines()]
     msg = "; ".join(ln for ln in lines if ln)
-    if len(msg) > ERROR_LINE_MAX:
-        msg = f"{msg[:ERROR_LINE_MAX]}... ({len(msg) - ERROR_LINE_MAX} more characters)"
+    if len(msg) > ERROR_LINE_MAX:  # the start and the end (where a file name often is)
+        cut = len(msg) - ERROR_LINE_MAX
+        msg = f"{msg[:ERROR_LINE_MAX - 400]}... ({cut} characters left out) ...{msg[-400:]}"
     click.echo(f"Error: {msg}", err=True)
     ctx = exc.ctx
     if ctx is not None and ctx.command.get_help_option(ctx) is not None:

@@ -95,6 +95,10 @@ class _Group(click.Group):
             return super().make_context(*args, **kwargs)
         except KeyboardInterrupt:
             _interrupted()
+        except click.exceptions.NoArgsIsHelpError:
+            raise  # the help text, as click shows it
+        except click.UsageError as exc:  # the group's own options: one "Error:" line and the hint
+            short_usage_error(exc)
 
     def invoke(self, ctx):  # noqa: ANN001
         from uvms_mj.physics.build import CompiledModeError, compiled_mode
@@ -108,6 +112,8 @@ class _Group(click.Group):
             return super().invoke(ctx)
         except KeyboardInterrupt:
             _interrupted()
+        except click.exceptions.NoArgsIsHelpError:
+            raise  # the help text, as click shows it
         except click.UsageError as exc:  # one "Error:" line and the help hint (not click's usage block)
             short_usage_error(exc)
 

@@ -36,6 +36,10 @@ _FOREIGN = (
 )
 
 
+#: How every refusal begins (after the path): the words the command line has always used for a bad log.
+_NOT = "not a readable uvms-mj MCAP log"
+
+
 class LogFileError(ValueError):
     """A file given as a log that is not one (its message: the file and what is wrong, one line)."""
 
@@ -88,22 +92,22 @@ def check_log_file(path: str | os.PathLike) -> LogHead:
     except OSError as exc:
         raise LogFileError(f"{p}: cannot be read ({exc.strerror or exc})") from None
     if not stat.S_ISREG(st.st_mode):
-        raise LogFileError(f"{p}: not a regular file ({_file_type(st.st_mode)}); a log is an MCAP file")
+        raise LogFileError(f"{p}: {_NOT}: not a regular file ({_file_type(st.st_mode)})")
     if st.st_size == 0:
-        raise LogFileError(f"{p}: empty file (0 bytes); not an MCAP log")
+        raise LogFileError(f"{p}: {_NOT}: empty file (0 bytes)")
     try:
         with open(p, "rb") as f:
             head = f.read(len(MCAP_MAGIC) + 9)
             if not head.startswith(MCAP_MAGIC):
-                raise LogFileError(f"{p}: not an MCAP log (no MCAP magic at its start; it looks like {_kind(head)})")
+                raise LogFileError(f"{p}: {_NOT}: no MCAP magic at its start (it looks like {_kind(head)})")
             if len(head) == len(MCAP_MAGIC):
-                raise LogFileError(f"{p}: holds only the MCAP magic ({st.st_size} bytes): a log cut before its "
+                raise LogFileError(f"{p}: {_NOT}: only the MCAP magic ({st.st_size} bytes), cut before its "
                                    "header; nothing to read")
             if len(head) < len(MCAP_MAGIC) + 9:
-                raise LogFileError(f"{p}: {st.st_size} bytes: an MCAP file cut inside its header record")
+                raise LogFileError(f"{p}: {_NOT}: {st.st_size} bytes, cut inside its header record")
             op, length = struct.unpack("<BQ", head[len(MCAP_MAGIC):])
             if op != _OP_HEADER or length > min(_HEADER_MAX, st.st_size - len(head)) or length < 8:
-                raise LogFileError(f"{p}: not a valid MCAP log: its first record (byte {len(MCAP_MAGIC)}) is not a "
+                raise LogFileError(f"{p}: {_NOT}: its first record (byte {len(MCAP_MAGIC)}) is not a "
                                    f"header (opcode 0x{op:02x}, length {length}; a header is opcode 0x01)")
             body = f.read(length)
     except OSError as exc:
@@ -112,11 +116,11 @@ def check_log_file(path: str | os.PathLike) -> LogHead:
     pos = 0
     for _ in range(2):  # profile, library: uint32 length + UTF-8
         if pos + 4 > len(body):
-            raise LogFileError(f"{p}: not a valid MCAP log: its header record is malformed")
+            raise LogFileError(f"{p}: {_NOT}: its header record is malformed")
         (n,) = struct.unpack_from("<I", body, pos)
         raw = body[pos + 4: pos + 4 + n]
         if len(raw) != n:
-            raise LogFileError(f"{p}: not a valid MCAP log: its header record is malformed")
+            raise LogFileError(f"{p}: {_NOT}: its header record is malformed")
         strings.append(raw.decode("utf-8", "replace"))
         pos += 4 + n
     return LogHead(size=st.st_size, profile=strings[0], library=strings[1])
@@ -129,4 +133,4 @@ def check_log_content(path: str | os.PathLike, head: LogHead, sample_channels: i
     if sample_channels or has_metadata or head.library.startswith("uvms_mj"):
         return
     by = f" (written by {head.library!r})" if head.library else ""
-    raise LogFileError(f"{path}: an MCAP file without uvms-mj channels or metadata{by}; not a uvms-mj log")
+    raise LogFileError(f"{path}: {_NOT}: an MCAP file without uvms-mj channels or metadata{by}")
