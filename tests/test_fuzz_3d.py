@@ -181,13 +181,20 @@ def test_fuzz_mjcf_files(tmp_path):
 
 def _mutate_trial(rng: random.Random, folder: Path) -> str:
     files = sorted(folder.glob("traj015-0_*.csv")) + [folder / "metadata_015-0.yml"]
-    f = rng.choice(files)
+    f = rng.choice([f for f in files if f.exists()] or files)
+    if not f.exists():
+        return f"{f.name}: already deleted"
     data = f.read_bytes()
     op = rng.choice(["truncate", "swap columns", "junk", "nan", "huge", "delete", "empty", "long line"])
+    text = data.decode("utf-8", "replace")
+    if op in ("swap columns", "nan", "huge") and (f.suffix != ".csv" or "," not in text.partition("\n")[0]):
+        op = "truncate"  # needs a CSV header with two columns or more
+    if op == "truncate" and not data:
+        op = "delete"
     if op == "truncate":
         f.write_bytes(data[: rng.randrange(len(data))])
     elif op == "swap columns":
-        lines = data.decode().splitlines()
+        lines = text.splitlines()
         head = lines[0].split(",")
         i, j = rng.sample(range(len(head)), 2)
         head[i], head[j] = head[j], head[i]
@@ -196,7 +203,7 @@ def _mutate_trial(rng: random.Random, folder: Path) -> str:
         at = rng.randrange(len(data))
         f.write_bytes(data[:at] + bytes(rng.randrange(256) for _ in range(64)) + data[at:])
     elif op in ("nan", "huge"):
-        lines = data.decode().splitlines()
+        lines = text.splitlines()
         n = rng.randrange(1, len(lines)) if len(lines) > 1 else 0
         parts = lines[n].split(",")
         parts[rng.randrange(len(parts))] = "nan" if op == "nan" else "1e308"

@@ -41,6 +41,16 @@ _CHECKS = (
 )
 
 
+#: MuJoCo's own medium (<option density, viscosity, wind>; uvms.water models the water, so these are
+#: normally 0): (attribute, low, high, unit), ours: ten times mercury's density, a thousand times water's viscosity.
+_OPTIONS = (
+    ("density", 0.0, 1.4e5, "kg/m^3"),
+    ("viscosity", 0.0, 1.0, "Pa s"),
+    ("wind", -1e3, 1e3, "m/s"),
+    ("magnetic", -1e3, 1e3, "T"),
+)
+
+
 def _name(m: mujoco.MjModel, kind, i: int) -> str:
     if kind is None:
         return f"[{i}]"
@@ -57,6 +67,11 @@ def check_model_numbers(m: mujoco.MjModel, source: str = "model") -> str | None:
     g = np.asarray(m.opt.gravity, dtype=float)
     if not np.all(np.isfinite(g)) or float(np.max(np.abs(g))) > GRAVITY_MAX:
         return f"{source}: <option gravity> = {' '.join(f'{x:g}' for x in g)} m/s^2: each component must be within +- {GRAVITY_MAX:g}"
+    for attr, lo, hi, unit in _OPTIONS:
+        v = np.atleast_1d(np.asarray(getattr(m.opt, attr), dtype=float))
+        if not np.all(np.isfinite(v)) or np.any(v < lo) or np.any(v > hi):
+            return (f"{source}: <option {attr}> = {' '.join(f'{x:g}' for x in v)} {unit} is outside "
+                    f"[{lo:g}, {hi:g}] (finite)")
     for field, kind, attr, lo, hi, unit in _CHECKS:
         a = np.asarray(getattr(m, field), dtype=float)
         if not a.size:
