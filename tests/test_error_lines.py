@@ -140,10 +140,9 @@ def corpus(tmp_path_factory) -> dict[str, tuple[list, str]]:
         cases[f"robot {what.name}"] = (["validate", sc(f"rb_{what.name}", f"robot: {what}\n")], "not a regular file")
         cases[f"sim2real --overrides {what.name}"] = (["sim2real", EXCERPT, "--overrides", what], "not a regular file")
     cases["scenario fifo"] = (["validate", fifo], "is not a file")
-    cases["trajectory long line"] = (["validate", sc("tr_long", rob + f"trajectory: {{kind: csv, path: {d / 'long.csv'}}}\n")],
-                                     "line 2: longer than")
-    cases["trajectory not utf-8"] = (["validate", sc("tr_bad", rob + f"trajectory: {{kind: csv, path: {d / 'bad.csv'}}}\n")],
-                                     "not UTF-8")
+    for name, csv, needle in (("long line", "long.csv", "line 2: longer than"), ("not utf-8", "bad.csv", "not UTF-8")):
+        cases[f"trajectory {name}"] = (
+            ["validate", sc(f"tr_{csv}", rob + f"trajectory: {{kind: csv, path: {d / csv}}}\n")], needle)
     big = 2**64 + 1
     for field, value, needle in (
         ("plant.overrides={bluerov2.mass: %s}" % big, None, "bluerov2.mass"),
@@ -196,7 +195,8 @@ def corpus(tmp_path_factory) -> dict[str, tuple[list, str]]:
 
 
 CASE_NAMES = [
-    *(f"{c} {k}" for k in ("empty", "magic", "zeros", "image", "scenario", "foreign", "folder") for c in ("info", "export")),
+    *(f"{c} {k}" for k in ("empty", "magic", "zeros", "image", "scenario", "foreign", "folder")
+      for c in ("info", "export")),
     *(f"{c} {w}" for w in ("fifo", "zero") for c in ("info", "export", "plot", "render", "render --compare B",
                                                      "overrides_file", "trajectory", "robot", "sim2real --overrides")),
     "scenario fifo", "trajectory long line", "trajectory not utf-8",

@@ -66,7 +66,8 @@ def check_model_numbers(m: mujoco.MjModel, source: str = "model") -> str | None:
     ``source``, the element, the attribute, the value and the range; None when all are in range."""
     g = np.asarray(m.opt.gravity, dtype=float)
     if not np.all(np.isfinite(g)) or float(np.max(np.abs(g))) > GRAVITY_MAX:
-        return f"{source}: <option gravity> = {' '.join(f'{x:g}' for x in g)} m/s^2: each component must be within +- {GRAVITY_MAX:g}"
+        return (f"{source}: <option gravity> = {' '.join(f'{x:g}' for x in g)} m/s^2: each component must be "
+                f"within +- {GRAVITY_MAX:g}")
     for attr, lo, hi, unit in _OPTIONS:
         v = np.atleast_1d(np.asarray(getattr(m.opt, attr), dtype=float))
         if not np.all(np.isfinite(v)) or np.any(v < lo) or np.any(v > hi):

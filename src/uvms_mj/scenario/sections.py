@@ -151,7 +151,8 @@ class WavesSection(_Section):
     model: Literal["airy", "jonswap", "pierson_moskowitz"]
     height: float | None = Field(None, ge=SIZE_MIN, le=30.0, description="airy: wave height H = 2a; spectra: Hs [m]")
     hs: float | None = Field(None, ge=SIZE_MIN, le=30.0, description="the significant wave height Hs [m] (= height)")
-    period: float | None = Field(None, ge=WAVE_PERIOD_MIN, le=60.0, description="airy: period T; spectra: peak period Tp [s]")
+    period: float | None = Field(None, ge=WAVE_PERIOD_MIN, le=60.0,
+                                 description="airy: period T; spectra: peak period Tp [s]")
     tp: float | None = Field(None, ge=WAVE_PERIOD_MIN, le=60.0, description="the peak period Tp [s] (= period)")
     gamma: float = Field(DEFAULT_GAMMA, ge=1.0, le=7.0, description="JONSWAP peak enhancement factor")
     direction: float = Field(0.0, ge=-360.0, le=360.0, description="mean direction of travel, world, from +x "
@@ -159,7 +160,8 @@ class WavesSection(_Section):
     angle_unit: Literal["deg", "rad"] = "deg"
     spreading: float = Field(0.0, ge=0.0, le=MAX_SPREADING, description="cos^n spreading exponent n (0: "
                              "long-crested)")
-    depth: float | None = Field(None, ge=0.01, le=11000.0, description="water depth [m] (at least 1 cm); null: deep water")
+    depth: float | None = Field(None, ge=0.01, le=11000.0,
+                                description="water depth [m] (at least 1 cm); null: deep water")
     surface: float = Field(0.0, ge=-11000.0, le=1000.0, description="world z of the mean surface [m]")
     seed: int | None = Field(None, ge=0, le=SEED_MAX, description="random phases; null: the scenario's seed")
     n_components: int = Field(DEFAULT_COMPONENTS, ge=1, le=MAX_COMPONENTS, description="components of a spectrum")
