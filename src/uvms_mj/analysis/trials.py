@@ -376,6 +376,9 @@ def joint_offsets(model=None) -> np.ndarray:
 #: The longest line of a trial CSV [characters] (ours: the longest row of the Hinsdale 2023 trials is 284
 #: characters; a longer line, e.g. 200 MB without a line end, is refused without being read whole).
 CSV_LINE_MAX = 10_000
+#: The largest magnitude of a trial CSV value (ours: the times are seconds since 1970, 1.7e9; 1e308 as a
+#: quaternion component overflowed its norm).
+VALUE_MAX = 1e12
 
 
 class _Reader:
@@ -442,6 +445,11 @@ class _Reader:
             nonfinite = [c for c, v in zip(cols, vals) if not math.isfinite(v)]
             if nonfinite:
                 self.add(path, ln, f"NaN/inf in {', '.join(nonfinite)}", severity)
+                bad = True
+                continue
+            huge = [c for c, v in zip(cols, vals) if abs(v) > VALUE_MAX]
+            if huge:
+                self.add(path, ln, f"|value| > {VALUE_MAX:g} in {', '.join(huge)}", severity)
                 bad = True
                 continue
             rows.append(vals)
