@@ -180,6 +180,12 @@ def _check_value(key: str, v: Any, source: str) -> list[float]:
         raise OverrideError(f"{source}: {key}: value {v!r} must be a number or a list of numbers") from None
     if not all(math.isfinite(x) for x in f):
         raise OverrideError(f"{source}: {key}: value {v!r} must be finite")
+    from uvms_mj.plant.robot import OVERRIDE_MAX, OVERRIDE_MIN, SCALE_FIELDS  # the scenario overrides' bounds
+
+    tiny = attr in SCALE_FIELDS and any(0 < abs(x) < OVERRIDE_MIN for x in f)
+    if tiny or any(abs(x) > OVERRIDE_MAX for x in f):
+        raise OverrideError(f"{source}: {key}: value {v!r}: each number must be at most {OVERRIDE_MAX:g} in "
+                            f"magnitude (a scale such as a mass or a volume: 0 or at least {OVERRIDE_MIN:g})")
     n = _SIZES.get(attr)
     if body != "water" and n is not None and len(f) != n:
         raise OverrideError(f"{source}: {key}: needs {n} number(s), got {len(f)}")

@@ -54,6 +54,8 @@ from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
+from uvms_mj.io.paths import LineTooLong, read_lines
+
 __all__ = [
     "DEFAULT_CUTOFF_HZ",
     "DEFAULT_MAX_GAP_S",
@@ -371,6 +373,14 @@ def joint_offsets(model=None) -> np.ndarray:
     return data
 
 
+#: The longest line of a trial CSV [characters] (ours: the longest row of the Hinsdale 2023 trials is 284
+#: characters; a longer line, e.g. 200 MB without a line end, is refused without being read whole).
+CSV_LINE_MAX = 10_000
+#: The largest magnitude of a trial CSV value (ours: the times are seconds since 1970, 1.7e9; 1e308 as a
+#: quaternion component overflowed its norm).
+VALUE_MAX = 1e12
+
+
 class _Reader:
     """Collects the issues of one trial."""
 
@@ -386,20 +396,25 @@ class _Reader:
         """Parse a numeric CSV: column -> (N,) array for the required and the optional columns
         present, and the (N,) file line of each row; None (with issues) if unusable."""
         gap_severity = gap_severity or severity
-        if path is None or not path.is_file():
+        if path is None or not path.exists():
             self.add(path, None, "file missing", severity)
             return None
+        if not path.is_file():  # a folder, a FIFO or a device (/dev/zero): reading would block or never end
+            self.add(path, None, "not a regular file (a folder, FIFO or device): not read", severity)
+            return None
         try:
-            with open(path, newline="", encoding="utf-8") as fh:
-                raw_text = fh.read()
+            text, ended = read_lines(path, CSV_LINE_MAX)
+        except LineTooLong as e:
+            self.add(path, e.line, f"longer than {CSV_LINE_MAX} characters: not a CSV row (the file is not read "
+                     "further)", severity)
+            return None
         except UnicodeDecodeError as e:
             self.add(path, None, f"not UTF-8 text (byte {e.start}: {e.reason})", severity)
             return None
         except OSError as e:
             self.add(path, None, f"unreadable: {e.strerror or e}", severity)
             return None
-        text = raw_text.splitlines()
-        if text and raw_text and raw_text[-1] not in "\r\n":
+        if text and not ended:
             # a file cut while it was written (its last field may be cut short too)
             self.add(path, len(text), "the last line has no line end: the file may be cut short there", "warning")
         if not text or not text[0].strip():
@@ -430,6 +445,11 @@ class _Reader:
             nonfinite = [c for c, v in zip(cols, vals) if not math.isfinite(v)]
             if nonfinite:
                 self.add(path, ln, f"NaN/inf in {', '.join(nonfinite)}", severity)
+                bad = True
+                continue
+            huge = [c for c, v in zip(cols, vals) if abs(v) > VALUE_MAX]
+            if huge:
+                self.add(path, ln, f"|value| > {VALUE_MAX:g} in {', '.join(huge)}", severity)
                 bad = True
                 continue
             rows.append(vals)
@@ -492,16 +512,28 @@ def _discover(folder: Path) -> dict[str, dict[str, Path]]:
     return found
 
 
+#: The largest trial metadata file [bytes] (ours: the Hinsdale 2023 ones are below 1 kB).
+METADATA_MAX = 1_000_000
+
+
 def _read_start_time(r: _Reader, path: Path) -> tuple[float | None, bool]:
     """(start_time, ok) from a metadata YAML file."""
     import yaml
 
+    if not path.is_file():  # a FIFO or a device: reading would block or never end
+        r.add(path, None, "not a regular file (a folder, FIFO or device): not read")
+        return None, False
     try:
-        text = path.read_text()
+        if path.stat().st_size > METADATA_MAX:
+            raise OSError(f"{path.stat().st_size} bytes; a metadata file is at most {METADATA_MAX} bytes")
+        text = path.read_text(encoding="utf-8")
         doc = yaml.safe_load(text)
+    except UnicodeDecodeError as e:
+        r.add(path, None, f"not UTF-8 text (byte {e.start}: {e.reason})")
+        return None, False
     except (OSError, yaml.YAMLError) as e:
         line = getattr(getattr(e, "problem_mark", None), "line", None)
-        r.add(path, None if line is None else line + 1, f"unreadable YAML: {e}")
+        r.add(path, None if line is None else line + 1, f"unreadable YAML: {' '.join(str(e).split())}")
         return None, False
     line = next((i for i, s in enumerate(text.splitlines(), 1) if s.strip().startswith("start_time")), None)
     if not isinstance(doc, dict) or "start_time" not in doc:

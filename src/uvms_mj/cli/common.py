@@ -85,6 +85,33 @@ def _io_error(path, exc: OSError) -> None:
     sys.exit(EXIT_IO)
 
 
+#: The longest "Error:" line of a usage error [characters] (ours: a message listing many problems
+#: is cut there, with the count of what was left out).
+ERROR_LINE_MAX = 2000
+
+
+def _short_word(word: str, limit: int = 200) -> str:
+    """A word (no spaces) longer than ``limit``, e.g. a --set value of 3000 digits, as its start and end."""
+    if len(word) <= limit:
+        return word
+    return f"{word[:100]}...({len(word) - 140} characters)...{word[-40:]}"
+
+
+def short_usage_error(exc: click.UsageError) -> None:
+    """Print a usage error (exit 2) as at most two lines, then exit: ``Error: ...`` (its message on one line,
+    the lines of a multi-line message joined by "; ") and the help hint -- not click's usage block."""
+    lines = [" ".join(_short_word(w) for w in ln.split()) for ln in exc.format_message().splitlines()]
+    msg = "; ".join(ln for ln in lines if ln)
+    if len(msg) > ERROR_LINE_MAX:  # the start and the end (where a file name often is)
+        cut = len(msg) - ERROR_LINE_MAX
+        msg = f"{msg[:ERROR_LINE_MAX - 400]}... ({cut} characters left out) ...{msg[-400:]}"
+    click.echo(f"Error: {msg}", err=True)
+    ctx = exc.ctx
+    if ctx is not None and ctx.command.get_help_option(ctx) is not None:
+        click.echo(f"Try '{ctx.command_path} {ctx.help_option_names[0]}' for help.", err=True)
+    sys.exit(exc.exit_code)
+
+
 def _check_out(path, protect: tuple = (), kind: str = "log", option: str | None = None, **magic) -> Path:
     """:func:`uvms_mj.io.paths.check_output_path` with a refusal as a usage error (exit 2):
     one line naming ``option`` (when given), the path and why. ``protect``: the command's inputs;
@@ -193,10 +220,13 @@ def _load(path: str, sets: tuple[str, ...]):
 
 def _read(path) -> object:
     """read_log with bad files turned into a usage error (exit 2), never a traceback."""
+    from uvms_mj.io.logfile import LogFileError
     from uvms_mj.io.recorder import read_log
 
     try:
         return read_log(path)
+    except LogFileError as exc:
+        raise click.UsageError(str(exc)) from None
     except (MemoryError, RecursionError) as exc:
         raise click.UsageError(f"{path}: not a readable uvms-mj MCAP log ({type(exc).__name__})") from None
     except Exception as exc:  # noqa: BLE001 - McapError, struct, zstd, JSON... any malformed file

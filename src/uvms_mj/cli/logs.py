@@ -91,10 +91,13 @@ def info(log: str) -> None:
     """Metadata, channels and message counts of LOG (and whether it is truncated)."""
     from mcap.exceptions import McapError
 
+    from uvms_mj.io.logfile import LogFileError
     from uvms_mj.io.recorder import format_info, log_info
 
     try:
         text = format_info(log_info(log))
+    except LogFileError as exc:
+        raise click.UsageError(str(exc)) from None
     except (McapError, OSError, ValueError, KeyError) as exc:
         raise click.UsageError(f"{log}: not a readable uvms-mj MCAP log ({exc})") from None
     click.echo(text)

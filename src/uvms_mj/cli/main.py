@@ -71,7 +71,8 @@ from uvms_mj import __version__  # noqa: E402
 # is looked up (a command line imports only its own command's module: ``validate`` no sweep, no sim2real);
 # what they share in cli.common (re-exported here: the exit codes, metrics_table, the packaged scenarios).
 from uvms_mj.cli.common import (EXIT_DIVERGED, EXIT_INTERRUPTED, EXIT_IO, EXIT_RENDER,  # noqa: F401,E402
-                                _interrupted, metrics_table, packaged_scenarios, scenarios_dir)
+                                _interrupted, metrics_table, packaged_scenarios, scenarios_dir,
+                                short_usage_error)
 
 #: Command name -> (module, attribute) of its click command.
 _COMMANDS = {
@@ -133,6 +134,10 @@ class _Group(click.Group):
             return super().make_context(*args, **kwargs)
         except KeyboardInterrupt:
             _interrupted()
+        except click.exceptions.NoArgsIsHelpError:
+            raise  # the help text, as click shows it
+        except click.UsageError as exc:  # the group's own options: one "Error:" line and the hint
+            short_usage_error(exc)
 
     def invoke(self, ctx):  # noqa: ANN001
         from uvms_mj.physics.build import CompiledModeError, compiled_mode
@@ -146,6 +151,10 @@ class _Group(click.Group):
             return super().invoke(ctx)
         except KeyboardInterrupt:
             _interrupted()
+        except click.exceptions.NoArgsIsHelpError:
+            raise  # the help text, as click shows it
+        except click.UsageError as exc:  # one "Error:" line and the help hint (not click's usage block)
+            short_usage_error(exc)
 
 
 @click.group(cls=_Group, context_settings={"help_option_names": ["-h", "--help"]})

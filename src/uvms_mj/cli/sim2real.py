@@ -64,12 +64,23 @@ def _load(data_dir: str, model: str, overrides: str | None, names, neutral: bool
     from uvms_mj.physics import ModelError
     from uvms_mj.analysis.sim2real import OverrideError, build_model, load_overrides, model_path
     from uvms_mj.analysis.trials import load_trials
+    from uvms_mj.io.paths import InputFileError, check_input_file
 
     folder = _trial_dir(data_dir)
-    if not model_path(model).is_file():
+    mp = model_path(model)
+    if mp.exists() and not mp.is_file():
+        raise click.UsageError(f"--model: {mp}: not a regular file; give an MJCF file or a name in models/")
+    if not mp.is_file():
         raise click.UsageError(f"--model: no model {model!r} (a file, or a name in models/: {model_path(model)})")
     try:
+        if overrides:  # a FIFO or /dev/zero would block or never end
+            check_input_file(overrides, "an overrides file (YAML)", max_bytes=1_000_000)
         over = load_overrides(overrides) if overrides else {}
+    except InputFileError as exc:
+        raise click.UsageError(f"--overrides: {exc}") from None
+    except OverrideError as exc:
+        raise click.UsageError(str(exc)) from None
+    try:
         m = build_model(model, over, neutral=neutral)
     except (OverrideError, ModelError) as exc:
         raise click.UsageError(str(exc)) from None
@@ -77,6 +88,13 @@ def _load(data_dir: str, model: str, overrides: str | None, names, neutral: bool
         ts = load_trials(folder, model=m, names=names)
     except (FileNotFoundError, KeyError, ValueError) as exc:
         raise click.UsageError(str(exc).strip("'\"")) from None
+    def why(name):
+        return "; ".join((f"{i.file.name}{'' if i.line is None else f':{i.line}'}: " if i.file else "") + i.message
+                         for i in ts.skipped[name])
+
+    if not len(ts):  # exit 2 with one line: every trial and why it was skipped
+        raise click.UsageError(f"no usable trial in {folder}" + (": " + "; ".join(
+            f"{n} skipped ({why(n)})" for n in ts.skipped) if ts.skipped else ""))
     for issue in ts.issues:
         if issue.severity == "error":
             click.echo(str(issue), err=True)
@@ -91,11 +109,7 @@ def _load(data_dir: str, model: str, overrides: str | None, names, neutral: bool
         if rest:
             echo(f"{rest} other warning(s) while reading (mocap gaps, missing metadata...; listed in the JSON)")
     for name in ts.skipped:
-        click.echo(f"skipped trial {name}: " + "; ".join(
-            (f"{i.file.name}{'' if i.line is None else f':{i.line}'}: " if i.file else "") + i.message
-            for i in ts.skipped[name]), err=True)
-    if not len(ts):
-        raise click.UsageError(f"no usable trial in {folder}" + (f" (skipped: {', '.join(ts.skipped)})" if ts.skipped else ""))
+        click.echo(f"skipped trial {name}: {why(name)}", err=True)
     return m, over, ts
 
 

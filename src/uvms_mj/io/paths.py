@@ -157,3 +157,59 @@ def _open_locked(path: Path):
     except BaseException:
         os.close(fd)
         raise
+
+
+class InputFileError(ValueError):
+    """An input path that is not a readable regular file of a plausible size (the message: one line, the path
+    and why)."""
+
+
+def check_input_file(path: str | os.PathLike, what: str, max_bytes: int | None = None) -> Path:
+    """Refuse an input that cannot be read as a file, before opening it: missing; a folder; a FIFO, a
+    device (/dev/zero) or a socket (``os.stat`` only: opening a FIFO would block, reading /dev/zero would
+    never end); larger than ``max_bytes``. ``what`` names the input in the message ("an overrides file",
+    "a trajectory CSV"). Raises :class:`InputFileError`; returns the path."""
+    import stat as _stat
+
+    p = Path(path)
+    try:
+        st = os.stat(p)
+    except FileNotFoundError:
+        raise InputFileError(f"{p}: no such file ({what})") from None
+    except OSError as exc:
+        raise InputFileError(f"{p}: cannot be read ({exc.strerror or exc})") from None
+    if _stat.S_ISDIR(st.st_mode):
+        raise InputFileError(f"{p}: is a folder; expected {what}")
+    if not _stat.S_ISREG(st.st_mode):
+        kind = ("a FIFO" if _stat.S_ISFIFO(st.st_mode) else "a device" if _stat.S_ISCHR(st.st_mode)
+                or _stat.S_ISBLK(st.st_mode) else "a socket" if _stat.S_ISSOCK(st.st_mode) else "special")
+        raise InputFileError(f"{p}: not a regular file ({kind}); expected {what}")
+    if max_bytes is not None and st.st_size > max_bytes:
+        raise InputFileError(f"{p}: {st.st_size} bytes; {what} is at most {max_bytes} bytes")
+    return p
+
+
+class LineTooLong(ValueError):
+    """A line of a text input longer than allowed (``line``: its number, from 1)."""
+
+    def __init__(self, path, line: int, limit: int) -> None:
+        super().__init__(f"{path}, line {line}: longer than {limit} characters")
+        self.line = line
+
+
+def read_lines(path: str | os.PathLike, max_line: int) -> tuple[list[str], bool]:
+    """The lines of a UTF-8 text file without their line ends, and whether the last one had one. A line
+    longer than ``max_line`` characters raises :class:`LineTooLong` as soon as it is met (a 200 MB line is
+    never held whole); UnicodeDecodeError and OSError propagate."""
+    lines: list[str] = []
+    last = ""
+    with open(path, newline="", encoding="utf-8") as fh:
+        while True:
+            s = fh.readline(max_line + 1)
+            if not s:
+                break
+            if len(s) > max_line and not s.endswith(("\n", "\r")):
+                raise LineTooLong(path, len(lines) + 1, max_line)
+            last = s
+            lines.append(s.rstrip("\r\n"))
+    return lines, last.endswith(("\n", "\r"))

@@ -16,6 +16,7 @@ from mcap.exceptions import McapError
 from mcap.records import Channel, Chunk, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
 
+from uvms_mj.io.logfile import check_log_content, check_log_file
 from uvms_mj.io.schemas import METADATA_NAME, SAMPLE_TOPICS, STATUS_NAME
 from uvms_mj.plant.params import BodyParams, RobotParams, ThrusterParams
 from uvms_mj.sim.loop import RunResult
@@ -71,6 +72,8 @@ def _complete_prefix(f) -> tuple[int, bool]:
     while pos + 9 <= size:
         f.seek(pos)
         op, length = struct.unpack("<BQ", f.read(9))
+        if op == 0:  # not an MCAP opcode (zeros): the end of the readable records
+            break
         end = pos + 9 + length
         if end > size:
             break
@@ -289,6 +292,7 @@ def read_log(path: str | os.PathLike, as_dataframe: bool = False) -> LogData:
     ``meta`` (e.g. the RunResult's T, dt, seed, controller) that it does not already have,
     plus ``T`` (inferred from the sample times if recorded nowhere).
     """
+    head = check_log_file(path)  # a FIFO, device, foreign or empty file: LogFileError, one line
     state: dict = {}
     channels: dict[int, Channel] = {}
     metas: dict[str, dict] = {}
@@ -312,6 +316,7 @@ def read_log(path: str | os.PathLike, as_dataframe: bool = False) -> LogData:
         elif isinstance(r, Metadata):
             metas.setdefault(r.name, _decode_meta(r.metadata))
     truncated = state["truncated"]
+    check_log_content(path, head, len(columns), METADATA_NAME in metas)
     scan = {"metadata": metas}
     sample = [(cid, columns[cid]) for cid in channels if cid in columns]  # in the order of the channel records
     for _, col in sample:
@@ -356,9 +361,11 @@ def read_log(path: str | os.PathLike, as_dataframe: bool = False) -> LogData:
 def log_info(path: str | os.PathLike) -> dict:
     """Summary of a log: metadata, status, truncation, channels (schema, encodings, message
     counts), time range and number of complete samples. Works on truncated logs."""
+    head = check_log_file(path)
     recs, truncated = _records(path)
     scan = _scan(recs)
     sample_chs = _sample_channels(scan)
+    check_log_content(path, head, len(sample_chs), METADATA_NAME in scan["metadata"])
     seqs = _complete_sequences(scan, sample_chs)
     channels = []
     t_min = t_max = None

@@ -148,6 +148,13 @@ class BodyHydro:
 # ------------------------------------------------------------------------------------ parsing
 
 
+#: The largest magnitude of a plugin attribute's numbers (ours, SI: the scenario overrides' bound; 1e308 as a
+#: volume compiled and then made the controller's first command NaN: exit 1), and tighter ones by attribute:
+#: positions within 10 km, a volume up to 1000 m^3 (a 1e6 kg ship).
+VALUE_MAX = 1e9
+VALUE_LIMITS = {"pos": 1e4, "cob": 1e4, "volume": 1e3}
+
+
 class _Ctx:
     """Formats error messages: `<plugin>: [body '<name>': ]<key> = "<value>": <reason>`."""
 
@@ -169,6 +176,9 @@ class _Ctx:
             raise self.error(key, value, f"expected {allowed} number{plural}")
         if not np.all(np.isfinite(x)):
             raise self.error(key, value, "numbers must be finite")
+        limit = VALUE_LIMITS.get(key, VALUE_MAX)
+        if np.any(np.abs(x) > limit):
+            raise self.error(key, value, f"each number must be at most {limit:g} in magnitude")
         return x
 
     def check_keys(self, config: Mapping[str, str], allowed: tuple[str, ...]) -> None:

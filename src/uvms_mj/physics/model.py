@@ -26,6 +26,7 @@ import mujoco
 
 from uvms_mj.physics import build, config
 from uvms_mj.physics.mjwarnings import install_mujoco_warning_handler
+from uvms_mj.physics.modelcheck import check_model_numbers, check_spec_numbers
 
 WATER, HYDRO, THRUSTER = "uvms.water", "uvms.hydro", "uvms.thruster"
 PLUGINS = (WATER, HYDRO, THRUSTER)
@@ -208,6 +209,9 @@ def compile_spec(spec: mujoco.MjSpec, *, native: bool | None = None, source: str
             if empty:
                 raise ModelError(f"{source}: {p.plugin_name} instance {p.name!r}: attribute {empty[0]!r} = '': give a "
                                  "value or leave the attribute out (its default)")
+    bad = check_spec_numbers(spec, source)  # compiled as 0 by MuJoCo: refused before
+    if bad:
+        raise ModelError(bad)
     if native is None:
         native = plugins_available() or not uses_plugins(spec)
     stripped = bool(_texts(spec))
@@ -240,6 +244,9 @@ def compile_spec(spec: mujoco.MjSpec, *, native: bool | None = None, source: str
                 if given[fld] not in (0, size):
                     raise ModelError(f"{source}: keyframe {name!r}: {fld} has {given[fld]} values; the model "
                                      f"needs {size}")
+    bad = check_model_numbers(m, source)  # a mass of 1e308 or -1, a NaN inertia: MuJoCo compiles them
+    if bad:
+        raise ModelError(bad)
     resolved = {}
     for name, bh in bodies.items():
         bid = mujoco.mj_name2id(m, mujoco.mjtObj.mjOBJ_BODY, name)

@@ -59,12 +59,23 @@ def robot_path(robot: str | Path, base_dir: str | Path | None = None) -> Path:
     cands = [p] if p.is_absolute() else ([Path(base_dir) / p] if base_dir is not None else []) + [p]
     for c in cands:
         if c.is_file():
+            size = c.stat().st_size
+            if size > MJCF_FILE_MAX:
+                raise ParameterError(f"robot = {key!r}: {size} bytes; an MJCF file is at most {MJCF_FILE_MAX} bytes")
             return c.resolve()
+        if c.exists():  # a folder, a FIFO, a device (/dev/zero): MuJoCo's reader would block or never end
+            what = "a folder" if c.is_dir() else "not a regular file"
+            raise ParameterError(f"robot = {key!r}: {what}; give an MJCF file or a built-in robot "
+                                 f"({', '.join(BUILTIN_ROBOTS)})")
     close = difflib.get_close_matches(key, list(BUILTIN_ROBOTS), n=1, cutoff=0.6)
     hint = f" (did you mean {close[0]!r}?)" if close else ""
     raise ParameterError(f"robot = {key!r}: neither a built-in robot{hint} ({', '.join(BUILTIN_ROBOTS)}) "
                          "nor an existing MJCF file")
 
+
+#: The largest MJCF file a robot may be [bytes] (ours: the built-in robots' files are below 50 kB, their meshes
+#: are separate files; a larger file is not a robot description written by hand).
+MJCF_FILE_MAX = 10_000_000
 
 #: Built-in robots whose robot file is separate from the scene they run in (mujoco_menagerie's
 #: convention): name -> the robot file in ``models/`` (the paper's ``models/paper/scene.xml``

@@ -89,6 +89,13 @@ def _elements(spec: mujoco.MjSpec) -> dict[str, list[str]]:
 #: inertia, damping or force of an underwater robot; 1e308 passed validation and then made the
 #: first step non-finite).
 OVERRIDE_MAX = 1e9
+#: The smallest non-zero magnitude an override value may have (ours, as the scenario's SIZE_MIN: 1e-300 kg passed
+#: and ran as if massless; MuJoCo's own floor for masses and inertias is mjMINVAL = 1e-15).
+OVERRIDE_MIN = 1e-9
+#: The fields OVERRIDE_MIN applies to: scales (a position, a centre of buoyancy or a range may be as small
+#: as it likes: an identified cob of 1e-12 m is a fit that crossed zero).
+SCALE_FIELDS = frozenset({"mass", "inertia", "volume", "density", "damping", "armature", "frictionloss", "added_mass",
+                          "linear_damping", "quadratic_damping", "drag_coef", "tau"})
 
 
 def _numbers(key: str, value: Any, n: int | None, what: str) -> np.ndarray:
@@ -100,6 +107,9 @@ def _numbers(key: str, value: Any, n: int | None, what: str) -> np.ndarray:
         raise ParameterError(f"{key} = {value!r}: expected {what}")
     if np.any(np.abs(arr) > OVERRIDE_MAX):
         raise ParameterError(f"{key} = {value!r}: |value| must be <= {OVERRIDE_MAX:g} ({what})")
+    if key.rpartition(".")[2] in SCALE_FIELDS and np.any((arr != 0) & (np.abs(arr) < OVERRIDE_MIN)):
+        raise ParameterError(f"{key} = {value!r}: each value must be 0 or at least {OVERRIDE_MIN:g} in magnitude "
+                             f"({what})")
     if n is not None and n > 0 and arr.size != n:
         raise ParameterError(f"{key} = {value!r}: expected {n} number{'s' if n > 1 else ''} ({what})")
     if n == -1 and arr.size not in (6, 21, 36):

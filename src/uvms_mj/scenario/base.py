@@ -64,6 +64,10 @@ POSITION_SIZE_MAX = 1.0  # [m] position noise and quantum
 ANGLE_SIZE_MAX = math.pi  # [rad] angle noise and quantum
 VELOCITY_NOISE_MAX = 10.0  # [m/s, rad/s]
 SIZE_MIN = 1e-9  # smallest non-zero noise, quantum, speed, acceleration
+#: |joint angle| in a robot scenario [deg, or rad with angle_unit: rad] (ours: two turns, as
+#: initial.orientation.rpy; 2^64 + 1 passed validation)
+ANGLE_MAX = 720.0
+ANGULAR_SPEED_MAX = 3600.0  # |joint velocity| [angle_unit/s] (ours: ten turns a second)
 SEED_MAX = 2**63 - 1
 NAME_MAX = 100  # characters (the default log name must fit in a file name)
 DESCRIPTION_MAX = 10_000  # characters

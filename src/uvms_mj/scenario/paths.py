@@ -23,11 +23,15 @@ from pydantic import ConfigDict, Field, model_serializer, model_validator
 from uvms_mj.scenario.base import (
     _NO_VALUE,
     ACCEL_MAX,
+    ANGLE_MAX,
     DURATION_MAX,
     LENGTH_MAX,
+    PARAM_ABS_MAX,
     SIZE_MIN,
     SPEED_MAX,
     _Issues,
+    _non_finite,
+    _out_of_range,
     _Section,
     _suggest,
 )
@@ -112,6 +116,10 @@ class TrajectorySection(_Section):
                 if getattr(self, k) is None:
                     setattr(self, k, v)
         else:
+            for k, v in extra.items():  # a kind's own numbers (radius, period, points...): 1e308 ran as if fine
+                if _out_of_range(v) or _non_finite(v):
+                    raise _Issues([((k,), f"numbers must be finite, and 0 or within {SIZE_MIN:g} to "
+                                    f"{PARAM_ABS_MAX:g} in magnitude", v)])
             given = [k for k in _LINE_ONLY if getattr(self, k) is not None]
             if given:
                 raise _Issues([((given[0],), f"applies to kind 'line' only; kind {self.kind!r} takes its own keys "
@@ -166,7 +174,8 @@ def tip_path(section: TrajectorySection | None, tip0, base_dir: str | None = Non
 
 class Waypoint(_Section):
     t: float = Field(gt=0, le=DURATION_MAX, description="[s]")
-    joints: dict[str, float] = Field(description="joint name -> angle [arm.angle_unit]")
+    joints: dict[str, Annotated[float, Field(ge=-ANGLE_MAX, le=ANGLE_MAX)]] = Field(
+        description="joint name -> angle [arm.angle_unit], within +-720")
 
 
 class Arm(_Section):

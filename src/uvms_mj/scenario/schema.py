@@ -156,6 +156,9 @@ def validate_scenario(data: Any, source: str = "<scenario>", base_dir: str | Pat
         return Scenario.model_validate({**data, "base_dir": None if base_dir is None else str(base_dir)})
     except ValidationError as exc:
         raise ScenarioError(_format(exc, source)) from None
+    except (ArithmeticError, FloatingPointError) as exc:  # a number no bound caught made a check overflow
+        raise ScenarioError(f"{source}: a number is out of the range the checks can compute with "
+                            f"({type(exc).__name__}: {' '.join(str(exc).split())})") from None
 
 
 #: Limits on scenario files (a scenario is a few kB): size, nesting depth; aliases are refused.

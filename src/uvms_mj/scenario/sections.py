@@ -21,7 +21,8 @@ from uvms_mj.plant.layout import InitialState
 from uvms_mj.plant.plant import ThrusterFailure
 from uvms_mj.rotations import quat_from_rpy
 from uvms_mj.scenario.base import _NO_VALUE as _NO
-from uvms_mj.scenario.base import CURRENT_MAX, DURATION_MAX, FORCE_MAX, SEED_MAX, TAU_MAX, Hydro, _Issues, _Section
+from uvms_mj.scenario.base import (ANGLE_MAX, ANGULAR_SPEED_MAX, CURRENT_MAX, DURATION_MAX, FORCE_MAX, PARAM_ABS_MAX,
+                                   SEED_MAX, SIZE_MIN, TAU_MAX, Hydro, _Issues, _Section)
 
 __all__ = ["CurrentSection", "Failure", "Initial", "Orientation", "PayloadSection", "PlantSection", "Setpoint",
            "TetherSection", "ThrustersSection", "Vehicle", "WavesSection"]
@@ -29,6 +30,8 @@ __all__ = ["CurrentSection", "Failure", "Initial", "Orientation", "PayloadSectio
 #: Bounds (as the paper scenario's).
 POSITION_MAX = 1000.0  # [m] |initial.position|, |vehicle.setpoint.position|
 VELOCITY_MAX = 10.0  # [m/s], [rad/s] initial velocities
+#: [s] the shortest wave period (ours: capillary ripples are below 0.1 s; 1e-300 overflowed the spectrum: a traceback)
+WAVE_PERIOD_MIN = 0.1
 
 Vec3 = Annotated[list[Annotated[float, Field(ge=-POSITION_MAX, le=POSITION_MAX)]], Field(min_length=3, max_length=3)]
 Vel3 = Annotated[list[Annotated[float, Field(ge=-VELOCITY_MAX, le=VELOCITY_MAX)]], Field(min_length=3, max_length=3)]
@@ -38,8 +41,9 @@ Cur3 = Annotated[list[Annotated[float, Field(ge=-CURRENT_MAX, le=CURRENT_MAX)]],
 class Orientation(_Section):
     """The vehicle's initial orientation: a quaternion or roll/pitch/yaw (not both)."""
 
-    quat: Annotated[list[float], Field(min_length=4, max_length=4)] | None = Field(
-        None, description="[w, x, y, z], normalised")
+    quat: Annotated[list[Annotated[float, Field(ge=-PARAM_ABS_MAX, le=PARAM_ABS_MAX)]],
+                    Field(min_length=4, max_length=4)] | None = Field(
+        None, description="[w, x, y, z], normalised (components within +-1e6: 1e308 overflowed the norm)")
     rpy: Annotated[list[Annotated[float, Field(ge=-720, le=720)]], Field(min_length=3, max_length=3)] | None = Field(
         None, description="roll, pitch, yaw in initial.angle_unit (z-y-x convention)")
 
@@ -58,11 +62,13 @@ class Initial(_Section):
     keyframe: str | None = Field(None, description="a model keyframe to start from")
     position: Vec3 | None = Field(None, description="vehicle origin, world [m]")
     orientation: Orientation | None = None
-    joints: dict[str, float] = Field(default_factory=dict, description="joint name -> angle [angle_unit]")
+    joints: dict[str, Annotated[float, Field(ge=-ANGLE_MAX, le=ANGLE_MAX)]] = Field(
+        default_factory=dict, description="joint name -> angle [angle_unit], within +-720")
     angle_unit: Literal["deg", "rad"] = Field("deg", description="unit of rpy, joints and joint_velocities")
     linear_velocity: Vel3 | None = Field(None, description="world [m/s]")
     angular_velocity: Vel3 | None = Field(None, description="body frame [rad/s]")
-    joint_velocities: dict[str, float] = Field(default_factory=dict, description="joint name -> [angle_unit/s]")
+    joint_velocities: dict[str, Annotated[float, Field(ge=-ANGULAR_SPEED_MAX, le=ANGULAR_SPEED_MAX)]] = Field(
+        default_factory=dict, description="joint name -> [angle_unit/s], within +-3600")
 
     def state(self) -> InitialState:
         """As :class:`uvms_mj.plant.layout.InitialState` (radians)."""
@@ -143,17 +149,19 @@ class WavesSection(_Section):
     them. ``height``/``hs`` and ``period``/``tp`` are two spellings of one field each (give one)."""
 
     model: Literal["airy", "jonswap", "pierson_moskowitz"]
-    height: float | None = Field(None, gt=0, le=30.0, description="airy: wave height H = 2a; spectra: Hs [m]")
-    hs: float | None = Field(None, gt=0, le=30.0, description="the significant wave height Hs [m] (= height)")
-    period: float | None = Field(None, gt=0, le=60.0, description="airy: period T; spectra: peak period Tp [s]")
-    tp: float | None = Field(None, gt=0, le=60.0, description="the peak period Tp [s] (= period)")
+    height: float | None = Field(None, ge=SIZE_MIN, le=30.0, description="airy: wave height H = 2a; spectra: Hs [m]")
+    hs: float | None = Field(None, ge=SIZE_MIN, le=30.0, description="the significant wave height Hs [m] (= height)")
+    period: float | None = Field(None, ge=WAVE_PERIOD_MIN, le=60.0,
+                                 description="airy: period T; spectra: peak period Tp [s]")
+    tp: float | None = Field(None, ge=WAVE_PERIOD_MIN, le=60.0, description="the peak period Tp [s] (= period)")
     gamma: float = Field(DEFAULT_GAMMA, ge=1.0, le=7.0, description="JONSWAP peak enhancement factor")
     direction: float = Field(0.0, ge=-360.0, le=360.0, description="mean direction of travel, world, from +x "
                              "towards +y, in angle_unit")
     angle_unit: Literal["deg", "rad"] = "deg"
     spreading: float = Field(0.0, ge=0.0, le=MAX_SPREADING, description="cos^n spreading exponent n (0: "
                              "long-crested)")
-    depth: float | None = Field(None, gt=0, le=11000.0, description="water depth [m]; null: deep water")
+    depth: float | None = Field(None, ge=0.01, le=11000.0,
+                                description="water depth [m] (at least 1 cm); null: deep water")
     surface: float = Field(0.0, ge=-11000.0, le=1000.0, description="world z of the mean surface [m]")
     seed: int | None = Field(None, ge=0, le=SEED_MAX, description="random phases; null: the scenario's seed")
     n_components: int = Field(DEFAULT_COMPONENTS, ge=1, le=MAX_COMPONENTS, description="components of a spectrum")
@@ -194,13 +202,19 @@ class PayloadSection(_Section):
     """A payload picked up during the run (:class:`uvms_mj.plant.robot.Payload`), unknown to the
     nominal model."""
 
-    mass: float = Field(gt=0, le=1000.0, description="[kg]")
+    mass: float = Field(ge=SIZE_MIN, le=1000.0, description="[kg] (at least 1e-9: smaller is no payload)")
     t: float = Field(0.0, ge=0, le=DURATION_MAX, description="pick-up time [s]")
     site: str | None = Field(None, min_length=1, description="site it is welded to; null: the tip site")
-    offset: Annotated[list[float], Field(min_length=3, max_length=3)] = Field(
-        default_factory=lambda: [0.0, 0.0, 0.0], description="centre in the site frame [m]")
-    radius: float = Field(0.02, gt=0, le=1.0, description="for its inertia (solid sphere) [m]")
-    volume: float = Field(0.0, ge=0, le=1.0, description="displaced volume [m^3]")
+    radius: float = Field(0.02, ge=SIZE_MIN, le=1.0, description="for its inertia (solid sphere) [m]")
+    volume: float = Field(0.0, ge=0, le=1.0, description="displaced volume [m^3]: 0, or at least 1e-9")
+    offset: Annotated[list[Annotated[float, Field(ge=-1.0, le=1.0)]], Field(min_length=3, max_length=3)] = Field(
+        default_factory=lambda: [0.0, 0.0, 0.0], description="centre in the site frame [m], within +-1 m")
+
+    @model_validator(mode="after")
+    def _volume(self) -> "PayloadSection":
+        if 0 < self.volume < SIZE_MIN:
+            raise _Issues([(("volume",), f"must be 0 or at least {SIZE_MIN:g} m^3", self.volume)])
+        return self
 
     def payload(self):
         from uvms_mj.plant.robot import Payload

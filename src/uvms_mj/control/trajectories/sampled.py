@@ -22,16 +22,34 @@ _CSV_QUAT = ("qw", "qx", "qy", "qz")
 _BC_TYPES = ("not-a-knot", "natural", "clamped")
 
 
+#: The longest line of a trajectory CSV [characters] (ours: a row of 8 numbers is below 200; a longer line,
+#: e.g. 200 MB without a line end, is not a trajectory row and is refused without being read whole).
+CSV_LINE_MAX = 10_000
+
+
 def _read_csv(path: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
-    if not path.is_file():
-        raise ValueError(f"trajectory.path = {str(path)!r}: no such file")
+    from uvms_mj.io.paths import InputFileError, LineTooLong, check_input_file, read_lines
+
+    try:
+        check_input_file(path, "a trajectory CSV file")  # a FIFO or /dev/zero: refused, not read
+        lines, _ = read_lines(path, CSV_LINE_MAX)
+    except InputFileError as exc:
+        raise ValueError(f"trajectory.path = {str(path)!r}: {str(exc).split(': ', 1)[1]}") from None
+    except LineTooLong as exc:
+        raise ValueError(f"{exc}; not a trajectory row (t,x,y,z[,qw,qx,qy,qz])") from None
+    except UnicodeDecodeError as exc:
+        raise ValueError(f"{path}: not UTF-8 text (byte {exc.start}: {exc.reason})") from None
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot be read ({exc.strerror or exc})") from None
     rows: list[tuple[int, list[str]]] = []
-    with path.open(newline="") as fh:
-        reader = csv.reader(fh)
-        for row in reader:
-            if not row or all(not c.strip() for c in row) or row[0].lstrip().startswith("#"):
-                continue
-            rows.append((reader.line_num, row))
+    for line_num, text in enumerate(lines, start=1):
+        try:
+            row = next(csv.reader([text]), [])
+        except csv.Error as exc:
+            raise ValueError(f"{path}, line {line_num}: {exc}") from None
+        if not row or all(not c.strip() for c in row) or row[0].lstrip().startswith("#"):
+            continue
+        rows.append((line_num, row))
     if not rows:
         raise ValueError(f"{path}: empty file; expected a header row {','.join(_CSV_POS)}[,{','.join(_CSV_QUAT)}]")
     hline, header = rows[0]
