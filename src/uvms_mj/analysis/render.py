@@ -56,6 +56,17 @@ __all__ = ["RenderError", "DEBIAN_PACKAGES", "ROBOT_CAMERAS", "configure_gl", "g
            "render_compare_video", "render_frames", "render_video", "robot_of"]
 
 
+def _cpu_now() -> float:
+    """CPU seconds used so far by this process (all threads: llvmpipe's too) and its waited-for
+    children (ffmpeg once it has exited)."""
+    try:
+        import resource
+    except ImportError:  # not on Unix: this process only
+        return time.process_time()
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + kids.ru_utime + kids.ru_stime
+
+
 def render_frames(
     log,
     fps: float = 30.0,
@@ -177,7 +188,7 @@ def render_video(
     Returns:
         {"path", "frames", "seconds" (video length), "fps", "size", "render_fps" (frames per
         second of scene update + rendering alone), "setup_s" (scene and GL context), "wall_s" (total,
-        encoding included)}.
+        encoding included), "cpu_s" (CPU seconds of this process, all its threads, and of ffmpeg)}.
 
     Raises:
         RenderError: no usable OpenGL (one-line message naming the packages to install).
@@ -187,7 +198,7 @@ def render_video(
     width, height = int(size[0]), int(size[1])
     if width % 2 or height % 2:
         raise ValueError(f"size = {size!r}: H.264 with yuv420p needs even width and height")
-    t_start = time.perf_counter()
+    t_start, cpu_start = time.perf_counter(), _cpu_now()
     replay = _replay(log, fps, (width, height), camera, speed, max_seconds, model_path, clock=True, labels=labels)
     setup_s = time.perf_counter() - t_start
     render_s, n = 0.0, 0
@@ -222,6 +233,7 @@ def render_video(
         "render_fps": n / render_s if render_s > 0 else float("inf"),
         "setup_s": setup_s,
         "wall_s": wall,
+        "cpu_s": _cpu_now() - cpu_start,
     }
 
 
@@ -317,7 +329,7 @@ def render_compare_video(
     if height % 2:
         raise ValueError(f"size = {size!r}: H.264 with yuv420p needs an even height")
     names = tuple(names) if names else (_controller_name(log_a) or "A", _controller_name(log_b) or "B")
-    t_start = time.perf_counter()
+    t_start, cpu_start = time.perf_counter(), _cpu_now()
     robots = (robot_of(log_a), robot_of(log_b))
     if any(r is not None for r in robots):
         a, b, err = _robot_compare_replays(log_a, log_b, robots, names, fps, (half, height), strip, speed,
@@ -365,4 +377,5 @@ def render_compare_video(
         "render_fps": n / render_s if render_s > 0 else float("inf"),
         "setup_s": setup_s,
         "wall_s": time.perf_counter() - t_start,
+        "cpu_s": _cpu_now() - cpu_start,
     }
