@@ -92,7 +92,7 @@ def test_fit_camera_fills_the_frame() -> None:
 @pytest.mark.parametrize("camera", ROBOT_CAMERAS)
 def test_vehicle_and_tip_stay_in_the_frame(log, camera) -> None:
     """At every frame the vehicle origin and the tip project inside the image with a 10 % margin,
-    and the robot's geoms span 35-80 % of the frame's limiting dimension (FILL = 58 % of the
+    and the robot's geoms span 35-80 % of the frame's limiting dimension (FILL = 64 % of the
     box over the whole motion; a single pose is smaller)."""
     rp = _replay(log, camera)
     try:

@@ -22,7 +22,7 @@ import numpy as np
 
 #: Fraction of the frame's limiting dimension the framed box spans [A: "the robot fills about
 #: half the frame", leaving room for the labels in the corners and for motion of the arm].
-FILL = 0.58
+FILL = 0.64
 #: Vertical field of view of the follow cameras [deg] [A: MuJoCo's default].
 FOVY = 45.0
 
