@@ -8,12 +8,15 @@ far (``tip_true``) are drawn as user geoms, a small clock in the top-left corner
 are piped to the ffmpeg that ships with imageio-ffmpeg (H.264, yuv420p, MP4).
 
 Robot logs (any floating robot, ``meta["robot"]``): the robot's MJCF file is compiled
-(:func:`uvms_mj.plant.robot.compile_robot_spec`) with a scene added to its MjSpec (a checkered sea
-floor 3 m below the vehicle's start, a directional light, a water-coloured gradient skybox and
-haze) and two cameras on the vehicle body in MuJoCo's "track" mode (:data:`ROBOT_CAMERAS`:
-position follows the vehicle, orientation fixed in the world); ``q_true`` is interpolated to the
-frame times (positions and angles linearly, quaternions by normalised lerp), and the tip trace
-and desired tip path are drawn in world coordinates (m, z up).
+(:func:`uvms_mj.plant.robot.compile_robot_spec`) with an underwater scene added to its MjSpec (a
+sand-coloured sea floor 3 m below the vehicle's start, haze in the water's colour, daylight
+dimmed with depth; :mod:`.render_robot`) and three cameras on the vehicle body in MuJoCo's
+"track" mode (:data:`ROBOT_CAMERAS`: position follows the vehicle, orientation fixed in the
+world; framed on the robot's geometry and its paths by :mod:`.render_camera`; the default
+``follow_arm`` looks from the arm's side); ``q_true`` is interpolated to the frame times
+(positions and angles linearly, quaternions by normalised lerp), and the tip trace and desired
+tip path are drawn in world coordinates (m, z up). The scale bar holds at the vehicle's distance
+from the camera.
 
 The work is split by responsibility: :mod:`.render_gl` (the OpenGL backend, chosen when a
 renderer starts; :class:`RenderError`), :mod:`.render_overlay` (clock, labels, error inset),
@@ -160,8 +163,8 @@ def render_video(
     """Replay a run's true motion into the MuJoCo scene and write an MP4 video.
 
     A robot log (``meta["robot"]`` with a name other than "paper", :func:`robot_of`) is replayed
-    in the robot's own model in a water scene (:func:`_robot_scene_model`: sea floor, light,
-    water-coloured background and haze, two follow cameras on the vehicle); its tip trace
+    in the robot's own model in a water scene (:func:`_robot_scene_model`: sea floor, lights,
+    haze and background in the water's colour, three follow cameras on the vehicle); its tip trace
     (``tip_true``, or the vehicle origin when the robot has no tip) and the desired tip path
     (``tip_desired``, when logged) are drawn in 3-D.
 
@@ -173,7 +176,7 @@ def render_video(
         size: (width, height) in pixels (even numbers).
         camera: None for a fixed side view along -Z (image up = +Y) fitted to the whole logged
             motion and the desired path; else a camera of the scene by name ("side", "track") or id.
-            Robot logs: "follow_three_quarter" (default) or "follow_side" (:data:`ROBOT_CAMERAS`),
+            Robot logs: "follow_arm" (default), "follow_three_quarter" or "follow_side" (:data:`ROBOT_CAMERAS`),
             another camera of the robot's model by name, or an id.
         speed: log seconds per video second.
         max_seconds: cap on the video length [s].
@@ -181,8 +184,9 @@ def render_video(
         model_path: scene model (default: the package's models/paper/scene.xml); for a robot log, the
             robot's MJCF file (default: ``meta["robot"]["path"]``, else the built-in of that name).
         labels: draw the controller's name (top right, from the log's metadata), a legend of the
-            desired path and the tip trace (bottom left) and, for the fitted side view, a scale
-            bar in the plane of motion (bottom right). Drawn once with matplotlib (Agg) and
+            desired path and the tip trace (bottom left) and a scale bar (bottom right): for the
+            fitted side view in the plane of motion, for a robot's follow camera at the vehicle's
+            distance (none for another camera of the model). Drawn once with matplotlib (Agg) and
             composited onto each frame.
 
     Returns:
@@ -315,7 +319,7 @@ def render_compare_video(
     divergence) holds its last frame. Returns the same dictionary as :func:`render_video`.
 
     Two robot logs (:func:`robot_of`): each half is that run's robot seen by the same follow
-    camera (``camera``: one of :data:`ROBOT_CAMERAS`, default the three-quarter view), and the
+    camera (``camera``: one of :data:`ROBOT_CAMERAS`, default ``follow_arm``), and the
     inset plots the end-tip error norm when both runs logged ``tip_desired`` (else the base
     position error norm). A robot log and a paper log cannot be compared (ValueError).
     ``camera`` is for robot logs only (the paper's halves always use the fitted side view).

@@ -7,7 +7,8 @@ relative to the vehicle origin at the same sample (the cameras follow the vehicl
 in the world). Each camera looks at the box's centre from a direction given in the vehicle's
 heading frame at the first sample (h = the horizontal direction from the vehicle origin towards
 the arm, s = z x h, z up), at the distance at which every point projects within :data:`FILL` of
-the frame's half-width and half-height (so the robot spans about that fraction of the frame) (pinhole projection with the camera's ``fovy``).
+the frame's half-width and half-height (so the robot spans about that fraction of the frame;
+pinhole projection with the camera's ``fovy``).
 
 :func:`px_per_metre` is the image scale at the vehicle's distance along the view axis, which the
 scale bar uses (a track camera keeps that distance over the whole video).

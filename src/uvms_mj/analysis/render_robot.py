@@ -165,7 +165,8 @@ def _framing(model, data, layout, q_log: np.ndarray, paths: list[np.ndarray]):
             arm_dir = (data.geom_xpos[arm].mean(axis=0) - origin) if arm else data.xmat[base].reshape(3, 3)[:, 0]
         if geoms:
             rot = data.geom_xmat[geoms].reshape(-1, 3, 3)
-            out.append((np.einsum("gij,gkj->gki", rot, local) + (data.geom_xpos[geoms] - origin)[:, None]).reshape(-1, 3))
+            world = np.einsum("gij,gkj->gki", rot, local) + (data.geom_xpos[geoms] - origin)[:, None]
+            out.append(world.reshape(-1, 3))
     a = layout.base_qadr
     step_p = max(1, len(q_log) // 400)
     for path in paths:  # a path's samples go with q_log's
