@@ -190,3 +190,22 @@ def test_compare_strip_text_is_not_clipped(size) -> None:
     for x0, y0, x1, y1 in ins.text_boxes:
         assert x0 >= 0 and y0 >= 0 and x1 <= w and y1 <= h, (size, (x0, y0, x1, y1))
     assert ins.frame(6.0).shape == (h, w, 3)
+
+
+def test_compare_halves_share_the_camera(log) -> None:
+    """Two runs of different motion, each framed on both: the same camera pose and scale bar in
+    both halves (to 1e-9: the same points in another order), unlike each framed alone."""
+    small = _synthetic_log()
+    n = len(small.t)  # held still at the first sample: a smaller motion to frame
+    small.signals = {k: np.repeat(v[:1], n, axis=0) for k, v in small.signals.items()}
+    robot = robot_of(log)
+    kw = dict(fps=5, size=(W, H), camera=None, speed=1.0, max_seconds=None, clock=False, labels=False)
+    a, b = _RobotReplay(log, robot, frame_also=small, **kw), _RobotReplay(small, robot, frame_also=log, **kw)
+    alone = _RobotReplay(small, robot, **kw)
+    try:
+        assert a.px_per_m == pytest.approx(b.px_per_m, rel=1e-9)
+        np.testing.assert_allclose(a.model.cam_pos0[a.cam], b.model.cam_pos0[b.cam], atol=1e-9)
+        assert abs(alone.px_per_m - b.px_per_m) > 1e-3 * b.px_per_m
+    finally:
+        for rp in (a, b, alone):
+            rp.close()

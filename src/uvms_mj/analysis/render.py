@@ -259,7 +259,7 @@ def _paper_compare_replays(log_a, log_b, names, fps, size, strip, speed, max_sec
 
 
 def _robot_compare_replays(log_a, log_b, robots, names, fps, size, strip, speed, max_seconds, model_path, camera):
-    """Two robot replays (each its own follow camera) and the error inset (or None)."""
+    """Two robot replays (the same follow camera, framed on both runs) and the error inset (or None)."""
     if any(r is None for r in robots):
         which = "first" if robots[0] is None else "second"
         raise ValueError(f"render_compare_video: the {which} log is of the paper's planar robot and the other of "
@@ -267,9 +267,10 @@ def _robot_compare_replays(log_a, log_b, robots, names, fps, size, strip, speed,
                          "3-D robot side by side is not supported")
     kw = dict(fps=fps, size=size, camera=camera, speed=speed, max_seconds=max_seconds, clock=True,
               model_path=model_path)
-    a = _RobotReplay(log_a, robots[0], title=names[0], **kw)
+    # each framed on both runs' motion: the same cameras, so the two scale bars agree
+    a = _RobotReplay(log_a, robots[0], title=names[0], frame_also=log_b, **kw)
     try:
-        b = _RobotReplay(log_b, robots[1], title=names[1], **kw)
+        b = _RobotReplay(log_b, robots[1], title=names[1], frame_also=log_a, **kw)
     except BaseException:
         a.close()
         raise

@@ -142,43 +142,45 @@ def _arm_geoms(model, geoms: list[int], base_body: int) -> list[int]:
     return [g for g in geoms if moved[int(model.geom_bodyid[g])]]
 
 
-def _framing(model, data, layout, q_log: np.ndarray, paths: list[np.ndarray]):
+def _framing(model, data, layout, segments: list[tuple[np.ndarray, list[np.ndarray]]]):
     """(points (N, 3): the corners of the robot's visible geoms' boxes (MuJoCo's ``geom_aabb``,
     in each geom's frame) and the paths' samples, as offsets from the vehicle origin at the same
-    sample [m, world], over at most ~40 logged configurations; the world direction from the
-    vehicle origin to the arm's geoms at the first sample, or the vehicle's x axis without an arm)."""
+    sample [m, world], over at most ~40 configurations of each segment; the world direction
+    from the vehicle origin to the arm's geoms, summed over the segments' first samples, or the
+    vehicle's x axis without an arm). ``segments``: (q samples (N, nq), paths (N, 3) each) of
+    one log, or of two (a comparison: the result does not depend on their order)."""
     import mujoco
 
     geoms = _visible_geoms(model)
     arm = _arm_geoms(model, geoms, layout.base_body)
-    base = layout.base_body
+    base, a = layout.base_body, layout.base_qadr
     signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
     aabb = model.geom_aabb[geoms].reshape(-1, 6) if geoms else np.zeros((0, 6))
     local = aabb[:, None, :3] + signs[None] * aabb[:, None, 3:]  # (G, 8, 3) geom frame
-    step = max(1, len(q_log) // 40)
-    out, arm_dir = [np.zeros((1, 3))], None
-    for q in np.vstack([q_log[::step], q_log[-1:]]):
-        data.qpos[:] = q
-        mujoco.mj_kinematics(model, data)
-        origin = data.xpos[base].copy()
-        if arm_dir is None:
-            arm_dir = (data.geom_xpos[arm].mean(axis=0) - origin) if arm else data.xmat[base].reshape(3, 3)[:, 0]
-        if geoms:
-            rot = data.geom_xmat[geoms].reshape(-1, 3, 3)
-            world = np.einsum("gij,gkj->gki", rot, local) + (data.geom_xpos[geoms] - origin)[:, None]
-            out.append(world.reshape(-1, 3))
-    a = layout.base_qadr
-    step_p = max(1, len(q_log) // 400)
-    for path in paths:  # a path's samples go with q_log's
-        rel = path[::step_p] - q_log[::step_p, a:a + 3]
-        out.append(rel[np.isfinite(rel).all(axis=1)])
-    return np.vstack(out), np.asarray(arm_dir, dtype=float)
+    out, arm_dir = [np.zeros((1, 3))], np.zeros(3)
+    for q_log, paths in segments:
+        step = max(1, len(q_log) // 40)
+        for k, q in enumerate(np.vstack([q_log[::step], q_log[-1:]])):
+            data.qpos[:] = q
+            mujoco.mj_kinematics(model, data)
+            origin = data.xpos[base].copy()
+            if k == 0:
+                arm_dir = arm_dir + ((data.geom_xpos[arm].mean(axis=0) - origin) if arm
+                                     else data.xmat[base].reshape(3, 3)[:, 0])
+            if geoms:
+                rot = data.geom_xmat[geoms].reshape(-1, 3, 3)
+                world = np.einsum("gij,gkj->gki", rot, local) + (data.geom_xpos[geoms] - origin)[:, None]
+                out.append(world.reshape(-1, 3))
+        step_p = max(1, len(q_log) // 400)
+        for path in paths:  # a path's samples go with q_log's
+            rel = path[::step_p] - q_log[::step_p, a:a + 3]
+            out.append(rel[np.isfinite(rel).all(axis=1)])
+    return np.vstack(out), arm_dir
 
 
-def _robot_cameras(model, data, layout, q_log: np.ndarray, paths: list[np.ndarray],
-                   aspect: float) -> dict[str, FollowCamera]:
+def _robot_cameras(model, data, layout, segments: list, aspect: float) -> dict[str, FollowCamera]:
     """The :data:`ROBOT_CAMERAS`, framed on the robot and its paths (:mod:`.render_camera`)."""
-    points, arm_dir = _framing(model, data, layout, q_log, paths)
+    points, arm_dir = _framing(model, data, layout, segments)
     frame = heading_frame(arm_dir)
     return {name: fit_camera(points, frame @ np.asarray(DIRECTIONS[name]), FOVY, aspect) for name in ROBOT_CAMERAS}
 
@@ -190,14 +192,16 @@ def _water_rgb(depth: float) -> np.ndarray:
 
 
 def _robot_scene_model(robot: dict, q_log: np.ndarray, width: int, height: int,
-                       model_path: str | Path | None = None, paths: tuple = ()):
+                       model_path: str | Path | None = None, paths: tuple = (), also: tuple | None = None):
     """The robot's model plus the replay scene (sandy sea floor, lights, water haze, the
     :data:`ROBOT_CAMERAS` on the vehicle body), the robot's Layout and the cameras
     (:class:`~.render_camera.FollowCamera` by name).
 
     ``q_log``: the logged qpos samples (N, nq); ``paths``: (N, 3) world paths to keep in view
-    (tip trace, desired tip path). The floor is :data:`_FLOOR_DEPTH` below the vehicle's start
-    and at least 0.5 m below its lowest point.
+    (tip trace, desired tip path). ``also``: (q samples, paths) of another log framed too (a
+    comparison: both halves get the same cameras, so their scale bars agree); ignored when its
+    qpos size differs. The floor is :data:`_FLOOR_DEPTH` below the vehicle's start and at least
+    0.5 m below its lowest point.
     """
     import mujoco
 
@@ -218,7 +222,10 @@ def _robot_scene_model(robot: dict, q_log: np.ndarray, width: int, height: int,
         raise ValueError(f"the log's q_true has {len(q0)} values per sample, the robot model {path.name} "
                          f"has nq = {plain.nq}: not this robot's log")
     data = mujoco.MjData(plain)
-    cams = _robot_cameras(plain, data, layout, q_log, list(paths), width / height)
+    segments = [(q_log, list(paths))]
+    if also is not None and also[0].ndim == 2 and also[0].shape[1] == plain.nq:
+        segments.append((also[0], list(also[1])))
+    cams = _robot_cameras(plain, data, layout, segments, width / height)
     a = layout.base_qadr
     # Track cameras keep their qpos0 offset from the body (world frame): express the wanted
     # world offset and axes in the body frame at qpos0.
@@ -285,13 +292,30 @@ def _finite_rows(x: np.ndarray | None, n: int, width: int) -> np.ndarray | None:
     return x
 
 
+def _framed_motion(log, max_seconds: float | None, speed: float):
+    """(q_true rows, [tip_true, tip_desired] rows) of ``log`` that a video of it would show
+    (finite samples up to ``max_seconds`` of video), or None without q_true."""
+    ts = np.asarray(log.t, dtype=float).ravel()
+    q = _signal(log, "q_true")
+    if q is None or q.ndim != 2 or len(q) != len(ts):
+        return None
+    ok = np.isfinite(ts) & np.isfinite(q).all(axis=1)
+    if max_seconds is not None and ok.any():
+        ok &= ts <= ts[ok][0] + float(max_seconds) * speed + 1e-9
+    if not ok.any():
+        return None
+    paths = [p[ok] for p in (_finite_rows(_signal(log, n), len(ts), 3) for n in ("tip_true", "tip_desired"))
+             if p is not None]
+    return q[ok], paths
+
+
 class _RobotReplay:
     """Replay of a robot log (:func:`robot_of`): the robot's own model in a water scene,
     followed by a tracking camera; same interface as :class:`_Replay`."""
 
     def __init__(self, log, robot: dict, fps: float, size: tuple[int, int], camera: str | int | None,
                  speed: float, max_seconds: float | None, clock: bool, labels: bool = True,
-                 title: str | None = None, model_path: str | Path | None = None) -> None:
+                 title: str | None = None, model_path: str | Path | None = None, frame_also=None) -> None:
         import mujoco
 
         width, height = _check_size(size, fps, speed)
@@ -314,9 +338,11 @@ class _RobotReplay:
         self.ts, self.speed, self.clock, self.height = ts, speed, clock, height
         self.frame_t = _frame_times(ts, fps, speed, max_seconds)
 
-        shown = ts <= self.frame_t[-1] + 1e-9  # the part of the log in the video
-        paths = tuple(p[shown] for p in (tip, desired) if p is not None)
-        model, layout, cams = _robot_scene_model(robot, q_log[shown], width, height, model_path, paths=paths)
+        # framed: the part of the log (and of frame_also's) in the video, found the same way for both
+        own = _framed_motion(log, max_seconds, speed)
+        also = _framed_motion(frame_also, max_seconds, speed) if frame_also is not None else None
+        model, layout, cams = _robot_scene_model(robot, own[0], width, height, model_path, paths=tuple(own[1]),
+                                                 also=also)
         self.model, self.layout = model, layout
         self.data = mujoco.MjData(model)
         self.qs = interp_qpos(self.frame_t, ts, q_log, _quat_slots(model))
