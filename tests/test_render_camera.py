@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from uvms_mj.analysis.render import RenderError, render_frames
-from uvms_mj.analysis.render_camera import FILL, fit_camera, project, px_per_metre
+from uvms_mj.analysis.render_camera import FILL, fit_camera, project
 from uvms_mj.analysis.render_robot import ROBOT_CAMERAS, _RobotReplay, _pose, robot_of
 from uvms_mj.plant.files import robot_path
 from uvms_mj.plant.robot import compile_robot_spec
