@@ -8,12 +8,15 @@ far (``tip_true``) are drawn as user geoms, a small clock in the top-left corner
 are piped to the ffmpeg that ships with imageio-ffmpeg (H.264, yuv420p, MP4).
 
 Robot logs (any floating robot, ``meta["robot"]``): the robot's MJCF file is compiled
-(:func:`uvms_mj.plant.robot.compile_robot_spec`) with a scene added to its MjSpec (a checkered sea
-floor 3 m below the vehicle's start, a directional light, a water-coloured gradient skybox and
-haze) and two cameras on the vehicle body in MuJoCo's "track" mode (:data:`ROBOT_CAMERAS`:
-position follows the vehicle, orientation fixed in the world); ``q_true`` is interpolated to the
-frame times (positions and angles linearly, quaternions by normalised lerp), and the tip trace
-and desired tip path are drawn in world coordinates (m, z up).
+(:func:`uvms_mj.plant.robot.compile_robot_spec`) with an underwater scene added to its MjSpec (a
+sand-coloured sea floor 3 m below the vehicle's start, haze in the water's colour, daylight
+dimmed with depth; :mod:`.render_robot`) and three cameras on the vehicle body in MuJoCo's
+"track" mode (:data:`ROBOT_CAMERAS`: position follows the vehicle, orientation fixed in the
+world; framed on the robot's geometry and its paths by :mod:`.render_camera`; the default
+``follow_arm`` looks from the arm's side); ``q_true`` is interpolated to the frame times
+(positions and angles linearly, quaternions by normalised lerp), and the tip trace and desired
+tip path are drawn in world coordinates (m, z up). The scale bar holds at the vehicle's distance
+from the camera.
 
 The work is split by responsibility: :mod:`.render_gl` (the OpenGL backend, chosen when a
 renderer starts; :class:`RenderError`), :mod:`.render_overlay` (clock, labels, error inset),
@@ -54,6 +57,17 @@ from uvms_mj.analysis.render_robot import ROBOT_CAMERAS, _robot_file, interp_qpo
 
 __all__ = ["RenderError", "DEBIAN_PACKAGES", "ROBOT_CAMERAS", "configure_gl", "gl_status", "interp_qpos",
            "render_compare_video", "render_frames", "render_video", "robot_of"]
+
+
+def _cpu_now() -> float:
+    """CPU seconds used so far by this process (all threads: llvmpipe's too) and its waited-for
+    children (ffmpeg once it has exited)."""
+    try:
+        import resource
+    except ImportError:  # not on Unix: this process only
+        return time.process_time()
+    kids = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return time.process_time() + kids.ru_utime + kids.ru_stime
 
 
 def render_frames(
@@ -149,8 +163,8 @@ def render_video(
     """Replay a run's true motion into the MuJoCo scene and write an MP4 video.
 
     A robot log (``meta["robot"]`` with a name other than "paper", :func:`robot_of`) is replayed
-    in the robot's own model in a water scene (:func:`_robot_scene_model`: sea floor, light,
-    water-coloured background and haze, two follow cameras on the vehicle); its tip trace
+    in the robot's own model in a water scene (:func:`_robot_scene_model`: sea floor, lights,
+    haze and background in the water's colour, three follow cameras on the vehicle); its tip trace
     (``tip_true``, or the vehicle origin when the robot has no tip) and the desired tip path
     (``tip_desired``, when logged) are drawn in 3-D.
 
@@ -162,7 +176,7 @@ def render_video(
         size: (width, height) in pixels (even numbers).
         camera: None for a fixed side view along -Z (image up = +Y) fitted to the whole logged
             motion and the desired path; else a camera of the scene by name ("side", "track") or id.
-            Robot logs: "follow_three_quarter" (default) or "follow_side" (:data:`ROBOT_CAMERAS`),
+            Robot logs: "follow_arm" (default), "follow_three_quarter" or "follow_side" (:data:`ROBOT_CAMERAS`),
             another camera of the robot's model by name, or an id.
         speed: log seconds per video second.
         max_seconds: cap on the video length [s].
@@ -170,14 +184,15 @@ def render_video(
         model_path: scene model (default: the package's models/paper/scene.xml); for a robot log, the
             robot's MJCF file (default: ``meta["robot"]["path"]``, else the built-in of that name).
         labels: draw the controller's name (top right, from the log's metadata), a legend of the
-            desired path and the tip trace (bottom left) and, for the fitted side view, a scale
-            bar in the plane of motion (bottom right). Drawn once with matplotlib (Agg) and
+            desired path and the tip trace (bottom left) and a scale bar (bottom right): for the
+            fitted side view in the plane of motion, for a robot's follow camera at the vehicle's
+            distance (none for another camera of the model). Drawn once with matplotlib (Agg) and
             composited onto each frame.
 
     Returns:
         {"path", "frames", "seconds" (video length), "fps", "size", "render_fps" (frames per
         second of scene update + rendering alone), "setup_s" (scene and GL context), "wall_s" (total,
-        encoding included)}.
+        encoding included), "cpu_s" (CPU seconds of this process, all its threads, and of ffmpeg)}.
 
     Raises:
         RenderError: no usable OpenGL (one-line message naming the packages to install).
@@ -187,7 +202,7 @@ def render_video(
     width, height = int(size[0]), int(size[1])
     if width % 2 or height % 2:
         raise ValueError(f"size = {size!r}: H.264 with yuv420p needs even width and height")
-    t_start = time.perf_counter()
+    t_start, cpu_start = time.perf_counter(), _cpu_now()
     replay = _replay(log, fps, (width, height), camera, speed, max_seconds, model_path, clock=True, labels=labels)
     setup_s = time.perf_counter() - t_start
     render_s, n = 0.0, 0
@@ -222,6 +237,7 @@ def render_video(
         "render_fps": n / render_s if render_s > 0 else float("inf"),
         "setup_s": setup_s,
         "wall_s": wall,
+        "cpu_s": _cpu_now() - cpu_start,
     }
 
 
@@ -243,7 +259,7 @@ def _paper_compare_replays(log_a, log_b, names, fps, size, strip, speed, max_sec
 
 
 def _robot_compare_replays(log_a, log_b, robots, names, fps, size, strip, speed, max_seconds, model_path, camera):
-    """Two robot replays (each its own follow camera) and the error inset (or None)."""
+    """Two robot replays (the same follow camera, framed on both runs) and the error inset (or None)."""
     if any(r is None for r in robots):
         which = "first" if robots[0] is None else "second"
         raise ValueError(f"render_compare_video: the {which} log is of the paper's planar robot and the other of "
@@ -251,9 +267,10 @@ def _robot_compare_replays(log_a, log_b, robots, names, fps, size, strip, speed,
                          "3-D robot side by side is not supported")
     kw = dict(fps=fps, size=size, camera=camera, speed=speed, max_seconds=max_seconds, clock=True,
               model_path=model_path)
-    a = _RobotReplay(log_a, robots[0], title=names[0], **kw)
+    # each framed on both runs' motion: the same cameras, so the two scale bars agree
+    a = _RobotReplay(log_a, robots[0], title=names[0], frame_also=log_b, **kw)
     try:
-        b = _RobotReplay(log_b, robots[1], title=names[1], **kw)
+        b = _RobotReplay(log_b, robots[1], title=names[1], frame_also=log_a, **kw)
     except BaseException:
         a.close()
         raise
@@ -303,7 +320,7 @@ def render_compare_video(
     divergence) holds its last frame. Returns the same dictionary as :func:`render_video`.
 
     Two robot logs (:func:`robot_of`): each half is that run's robot seen by the same follow
-    camera (``camera``: one of :data:`ROBOT_CAMERAS`, default the three-quarter view), and the
+    camera (``camera``: one of :data:`ROBOT_CAMERAS`, default ``follow_arm``), and the
     inset plots the end-tip error norm when both runs logged ``tip_desired`` (else the base
     position error norm). A robot log and a paper log cannot be compared (ValueError).
     ``camera`` is for robot logs only (the paper's halves always use the fitted side view).
@@ -317,7 +334,7 @@ def render_compare_video(
     if height % 2:
         raise ValueError(f"size = {size!r}: H.264 with yuv420p needs an even height")
     names = tuple(names) if names else (_controller_name(log_a) or "A", _controller_name(log_b) or "B")
-    t_start = time.perf_counter()
+    t_start, cpu_start = time.perf_counter(), _cpu_now()
     robots = (robot_of(log_a), robot_of(log_b))
     if any(r is not None for r in robots):
         a, b, err = _robot_compare_replays(log_a, log_b, robots, names, fps, (half, height), strip, speed,
@@ -365,4 +382,5 @@ def render_compare_video(
         "render_fps": n / render_s if render_s > 0 else float("inf"),
         "setup_s": setup_s,
         "wall_s": time.perf_counter() - t_start,
+        "cpu_s": _cpu_now() - cpu_start,
     }

@@ -1,10 +1,11 @@
 """What the renderer draws over the 3-D scene: log access helpers, the clock (a 5x7 bitmap font),
-the static labels (controller name, legend, scale bar; matplotlib Agg, once per video) and the
-tip-error inset of a comparison video (:mod:`uvms_mj.analysis.render`)."""
+the static labels (controller name, legend, scale bar; Pillow, once per video) and the
+tip-error inset of a comparison video (matplotlib Agg) (:mod:`uvms_mj.analysis.render`)."""
 
 from __future__ import annotations
 
 import math
+from pathlib import Path
 
 import numpy as np
 
@@ -166,38 +167,80 @@ class _Overlay:
             region[...] = (region * keep + rgb).astype(frame.dtype)
 
 
+def _font(size_px: int, bold: bool = False):
+    """DejaVu Sans (matplotlib's own font files, found without importing matplotlib) at
+    ``size_px`` pixels, through Pillow; Pillow's default font if the file is missing."""
+    import importlib.util
+
+    from PIL import ImageFont
+
+    spec = importlib.util.find_spec("matplotlib")
+    if spec is not None and spec.submodule_search_locations:
+        name = "DejaVuSans-Bold.ttf" if bold else "DejaVuSans.ttf"
+        path = Path(list(spec.submodule_search_locations)[0]) / "mpl-data" / "fonts" / "ttf" / name
+        if path.is_file():
+            return ImageFont.truetype(str(path), size_px)
+    return ImageFont.load_default(size_px)
+
+
+_BOX = (0, 0, 0, 140)  # the labels' backgrounds: black, alpha 0.55
+
+
 def _labels_overlay(width: int, height: int, title: str | None, px_per_m: float | None,
                     legend: bool, trace_label: str = "tip trace",
-                    desired_label: str | None = "desired tip path") -> _Overlay:
+                    desired_label: str | None = "desired tip path", scale_note: str | None = None) -> _Overlay:
     """Controller name (top right), legend of the paths (bottom left; ``desired_label`` None:
-    the trace alone) and a scale bar (bottom right)."""
-    fig, canvas = _rgba_canvas(width, height)
-    fs = max(7.0, height / 40)
-    box = {"boxstyle": "round,pad=0.3", "facecolor": (0, 0, 0, 0.55), "edgecolor": "none"}
+    the trace alone) and a scale bar of ``px_per_m`` [px/m] (bottom right; ``scale_note``: a
+    smaller line under it, e.g. where the scale holds). Drawn once with Pillow (a TrueType
+    font; importing matplotlib would cost about a second per video)."""
+    from PIL import Image, ImageDraw
+
+    img = Image.new("RGBA", (width, height), (0, 0, 0, 0))
+    draw = ImageDraw.Draw(img)
+    fs = max(9, int(round(height / 29)))
+    font, small = _font(fs), _font(max(8, int(round(0.75 * fs))))
+    pad = max(2, fs // 4)
+
+    def boxed(x: float, y: float, text: str, fnt, fill, anchor: str) -> tuple[int, int, int, int]:
+        l, t, r, b = draw.textbbox((x, y), text, font=fnt, anchor=anchor)
+        draw.rounded_rectangle((l - pad, t - pad, r + pad, b + pad), radius=pad, fill=_BOX)
+        draw.text((x, y), text, font=fnt, fill=fill, anchor=anchor)
+        return l, t, r, b
+
     if title:
-        fig.text(1 - 10 / width, 1 - 8 / height, title, ha="right", va="top", color="white", fontsize=fs * 1.3,
-                 fontweight="bold", bbox=box)
+        boxed(width - 8 - pad, 6 + pad, title, _font(int(round(1.3 * fs)), bold=True), (255, 255, 255, 255), "ra")
     if legend:
-        y = 10 / height
+        rows = [(trace_label, _RGBA_TRACE if trace_label == "tip trace" else _RGBA_BASE)]
         if desired_label:
-            fig.text(10 / width, y + 1.9 * fs / height * 1.4, "\u2014 " + desired_label,
-                     color=tuple(_RGBA_DESIRED[:3]), fontsize=fs, va="bottom", ha="left", bbox=box)
-        color = _RGBA_TRACE if trace_label == "tip trace" else _RGBA_BASE
-        fig.text(10 / width, y, "\u2014 " + trace_label, color=tuple(color[:3]), fontsize=fs, va="bottom",
-                 ha="left", bbox=box)
+            rows.insert(0, (desired_label, _RGBA_DESIRED))
+        y = height - 8 - pad
+        sample = int(1.6 * fs)
+        for label, rgba in reversed(rows):  # from the bottom up
+            x = 8 + pad + sample + pad
+            l, t, r, b = draw.textbbox((x, y), label, font=font, anchor="ld")
+            draw.rounded_rectangle((8, t - pad, r + pad, b + pad), radius=pad, fill=_BOX)
+            colour = tuple(int(round(255 * c)) for c in rgba[:3]) + (255,)
+            mid = (t + b) // 2
+            draw.line((8 + pad, mid, 8 + pad + sample, mid), fill=colour, width=max(2, fs // 5))
+            draw.text((x, y), label, font=font, fill=(255, 255, 255, 255), anchor="ld")
+            y = t - 2 * pad - 3
     if px_per_m and math.isfinite(px_per_m) and px_per_m > 0:
         length = _nice_length(0.25 * width / px_per_m)
-        bar = length * px_per_m
-        x1, y0 = width - 14, 14
-        fig.patches.append(__import__("matplotlib.patches", fromlist=["Rectangle"]).Rectangle(
-            ((x1 - bar - 6) / width, (y0 - 6) / height), (bar + 12) / width, (fs * 2.2 + 12) / height,
-            transform=fig.transFigure, facecolor=(0, 0, 0, 0.55), edgecolor="none"))
-        fig.add_artist(__import__("matplotlib.lines", fromlist=["Line2D"]).Line2D(
-            [(x1 - bar) / width, x1 / width], [y0 / height, y0 / height], transform=fig.transFigure,
-            color="white", linewidth=3, solid_capstyle="butt"))
-        fig.text((x1 - bar / 2) / width, (y0 + 5) / height, _fmt_length(length), color="white", fontsize=fs,
-                 ha="center", va="bottom")
-    return _Overlay(_canvas_rgba(canvas))
+        bar = int(round(length * px_per_m))
+        x1, y_bar = width - 14, height - 14  # the bar's right end and bottom row
+        text = _fmt_length(length)
+        lt, tt, rt, bt = draw.textbbox((x1 - bar / 2, y_bar - 8), text, font=font, anchor="md")
+        top, left = tt, min(x1 - bar, lt)
+        note_box = None
+        if scale_note:
+            note_box = draw.textbbox((x1 - bar / 2, tt - 2), scale_note, font=small, anchor="md")
+            top, left = note_box[1], min(left, note_box[0])
+        draw.rounded_rectangle((left - 6, top - 6, max(x1, rt) + 6, y_bar + 6), radius=pad, fill=_BOX)
+        draw.rectangle((x1 - bar, y_bar - 2, x1 - 1, y_bar), fill=(255, 255, 255, 255))  # 3 rows, bar px wide
+        draw.text((x1 - bar / 2, y_bar - 8), text, font=font, fill=(255, 255, 255, 255), anchor="md")
+        if note_box is not None:
+            draw.text((x1 - bar / 2, tt - 2), scale_note, font=small, fill=(220, 220, 220, 255), anchor="md")
+    return _Overlay(np.asarray(img))
 
 
 def _controller_name(log) -> str | None:
@@ -221,17 +264,27 @@ def _tip_error_mm(log) -> tuple[np.ndarray, np.ndarray] | None:
 
 
 class _ErrorInset:
-    """A strip under the panels: the tip error of each run against time, and a moving cursor."""
+    """A strip under the panels: the tip error of each run against time, and a moving cursor.
+
+    Laid out in pixels from the font size so that nothing is clipped at any strip size: the
+    title and the legend inside the axes (top left, top right), the y tick labels left of
+    the axes, the x tick labels under them and the unit "t [s]" at the x axis' right end.
+    :attr:`text_boxes` keeps every drawn text's (x0, y0, x1, y1) in pixels (from the bottom left)."""
 
     COLORS = ("#4da6ff", "#ffb347")
 
     def __init__(self, width: int, height: int, series: list[tuple[str, tuple[np.ndarray, np.ndarray]]],
                  title: str = "end-tip error [mm]") -> None:
+        from matplotlib.ticker import MaxNLocator
+
         fig, canvas = _rgba_canvas(width, height)
         fig.patch.set_facecolor((0.08, 0.08, 0.1, 1.0))
         fig.patch.set_alpha(1.0)
-        fs = max(6.0, height / 12)
-        ax = fig.add_axes((0.07, 0.22, 0.9, 0.68))
+        fs = float(np.clip(height / 10.0, 5.0, 12.0))  # points; 1 pt = 100/72 px at dpi 100
+        px = fs * 100 / 72
+        left, bottom, top = 3.3 * px + 8, 1.35 * px + 5, 4.0
+        right = 2.6 * px + 12  # room for "t [s]"
+        ax = fig.add_axes((left / width, bottom / height, 1 - (left + right) / width, 1 - (bottom + top) / height))
         ax.set_facecolor((0.12, 0.12, 0.15))
         t_max = 0.0
         for (name, (t, e)), color in zip(series, self.COLORS):
@@ -240,18 +293,29 @@ class _ErrorInset:
             t_max = max(t_max, float(t[ok].max()) if ok.any() else 0.0)
         ax.set_xlim(0.0, t_max or 1.0)
         ax.set_ylim(bottom=0.0)
-        ax.set_title(title, color="white", fontsize=fs, loc="left", pad=2)
-        ax.tick_params(colors="white", labelsize=fs * 0.85, length=2)
+        _, y_top = ax.get_ylim()
+        y_top = y_top if y_top > 0 else 1.0
+        ticks = [v for v in MaxNLocator(nbins=3, min_n_ticks=2).tick_values(0.0, y_top) if 0 <= v <= y_top]
+        ax.set_yticks(ticks)
+        ax.set_ylim(0.0, 1.35 * y_top)  # headroom for the title and the legend (no tick up there)
+        ax.xaxis.set_major_locator(MaxNLocator(nbins=max(2, int(width / (6 * px))), min_n_ticks=2))
+        texts = [ax.text(0.006, 0.96, title, transform=ax.transAxes, color="white", fontsize=fs, ha="left",
+                         va="top")]
+        ax.tick_params(colors="white", labelsize=fs * 0.85, length=2, pad=1.5)
         for sp in ax.spines.values():
             sp.set_color((0.6, 0.6, 0.6))
-        ax.set_xlabel("t [s]", color="white", fontsize=fs * 0.85, labelpad=0)
-        leg = ax.legend(fontsize=fs * 0.85, loc="upper right", frameon=False, labelcolor="white", ncol=2)
+        texts.append(fig.text(1 - (right - 6) / width, bottom / height, "t [s]", color="white", fontsize=fs * 0.85,
+                              ha="left", va="center"))
+        leg = ax.legend(fontsize=fs * 0.85, loc="upper right", frameon=False, labelcolor="white", ncol=2,
+                        borderaxespad=0.2, handlelength=1.2, columnspacing=1.0)
         self.image = _canvas_rgba(canvas)[..., :3]
+        renderer = canvas.get_renderer()
+        texts += list(leg.get_texts()) + [lb for lb in ax.get_xticklabels() + ax.get_yticklabels() if lb.get_text()]
+        self.text_boxes = [tuple(tx.get_window_extent(renderer).extents) for tx in texts if tx.get_visible()]
         # pixel columns of t = 0 and t = t_max, rows of the axes (image rows from the top)
         (x0, y0), (x1, y1) = ax.transData.transform([(0.0, 0.0), (t_max or 1.0, ax.get_ylim()[1])])
         self.x0, self.x1, self.t_max = x0, x1, t_max or 1.0
         self.r0, self.r1 = int(height - y1), int(height - y0)
-        del leg
 
     def frame(self, t: float) -> np.ndarray:
         img = self.image.copy()

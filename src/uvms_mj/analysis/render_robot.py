@@ -1,8 +1,16 @@
 """Any floating robot's replay (logs with ``meta["robot"]``, :mod:`uvms_mj.analysis.render`):
 the robot's MJCF file compiled (:func:`uvms_mj.plant.robot.compile_robot_spec`) with a water scene
-added to its MjSpec (a checkered sea floor 3 m below the vehicle's start, a directional light, a
-water-coloured gradient skybox and haze) and two cameras on the vehicle body in MuJoCo's "track"
-mode (:data:`ROBOT_CAMERAS`); ``q_true`` interpolated to the frame times (:func:`interp_qpos`)."""
+added to its MjSpec and three cameras on the vehicle body in MuJoCo's "track" mode
+(:data:`ROBOT_CAMERAS`, framed by :mod:`.render_camera`); ``q_true`` interpolated to the frame
+times (:func:`interp_qpos`).
+
+The underwater look (constants below, display choices [A]): a sand-coloured, untextured sea floor
+3 m below the vehicle's start; MuJoCo's (linear) fog in the water's colour from 0.8 m to 12 m
+from the eye, and a plane just beyond its end as the background; daylight from above and the
+water's colour dimmed with the vehicle's depth by exp(-K_d depth) (K_d = 0.12 / m, the surface
+at z = 0); a point light 1 m above the surface whose linear attenuation darkens what lies
+deeper; a dim headlight. Speed on a software rasterizer (Mesa llvmpipe): no multisampling, no
+shadow map, no skybox."""
 
 from __future__ import annotations
 
@@ -34,18 +42,30 @@ from uvms_mj.analysis.render_scene import (
     _frame_times,
     _pose,
 )
+from uvms_mj.analysis.render_camera import DIRECTIONS, FOVY, FollowCamera, fit_camera, heading_frame, px_per_metre
 
 
 # ------------------------------------------------------------------ any robot (logs with meta["robot"])
 
-#: The cameras added to a robot's scene, both on the vehicle body in MuJoCo's "track" mode
-#: (position follows the vehicle, orientation fixed in the world): a side view from the
-#: vehicle's starboard side (its -y axis at the first sample) and a three-quarter view from the
-#: front-left, above. The first is the default.
-ROBOT_CAMERAS = ("follow_three_quarter", "follow_side")
+#: The cameras added to a robot's scene, all on the vehicle body in MuJoCo's "track" mode
+#: (position follows the vehicle, orientation fixed in the world), framed on the robot and its
+#: paths (:mod:`.render_camera`): "follow_arm" in front of the arm and to its side, a little
+#: above (the default); "follow_three_quarter" from the front-left above; "follow_side" from the
+#: vehicle's starboard side (directions in the heading frame at the first sample).
+ROBOT_CAMERAS = ("follow_arm", "follow_three_quarter", "follow_side")
 _FLOOR_DEPTH = 3.0  # m below the vehicle's start (and at least 0.5 m below its lowest point)
-_SKY = ((0.16, 0.42, 0.62), (0.01, 0.06, 0.14))  # water: lighter above, darker below
-_FLOOR_RGB = ((0.50, 0.46, 0.36), (0.42, 0.38, 0.29))
+# The underwater look; display choices [A], not measurements:
+_SURFACE_Z = 0.0  # m: the water surface is the world's z = 0 (depth = -z)
+_KD = 0.12  # 1/m: diffuse attenuation of daylight with depth (clear coastal water: 0.05-0.3)
+_WATER = (0.10, 0.34, 0.46)  # the water's colour near the surface (fog and background)
+_FOG = (0.8, 12.0)  # m from the eye: haze starts, and only water is seen beyond
+_SUN = np.array([0.55, 0.62, 0.62])  # daylight from above (greenish-blue), before the depth's dimming
+_SURFACE_LIGHT = (0.45, 0.55, 0.6)  # the point light 1 m above the surface
+_SURFACE_ATTENUATION = 0.25  # 1/m: its linear attenuation (the deeper, the darker)
+_HEADLIGHT = ((0.18, 0.2, 0.22), (0.34, 0.36, 0.38))  # ambient, diffuse of the camera's lamp
+_RGBA_BACKDROP = np.array([0.0, 0.0, 0.0, 1.0], dtype=np.float32)  # fully fogged: shows the water's colour
+_FACETS = (16, 8)  # numslices, numstacks of the replay's primitives (a 16-gon: smooth enough at 640 x 480)
+_SAND = (0.62, 0.57, 0.44)  # sea floor: sand
 
 
 def robot_of(log) -> dict | None:
@@ -105,60 +125,89 @@ def interp_qpos(t: np.ndarray, ts: np.ndarray, q: np.ndarray, quat_slots: list[i
     return out
 
 
-def _geom_box(model, data, qpos: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """World bounds (lo, hi) of the visible geoms (group < 3, not planes) at ``qpos``."""
+def _visible_geoms(model) -> list[int]:
+    """The robot's visible geoms: on a body other than the world, group < 3, not planes."""
     import mujoco
 
-    data.qpos[:] = qpos
-    mujoco.mj_kinematics(model, data)
-    geoms = [g for g in range(model.ngeom) if model.geom_group[g] < 3
-             and model.geom_type[g] not in (mujoco.mjtGeom.mjGEOM_PLANE, mujoco.mjtGeom.mjGEOM_HFIELD)]
-    if not geoms:
-        p = data.xpos[1:] if model.nbody > 1 else np.zeros((1, 3))
-        return p.min(axis=0) - 0.1, p.max(axis=0) + 0.1
-    r = model.geom_rbound[geoms][:, None]
-    pos = data.geom_xpos[geoms]
-    return (pos - r).min(axis=0), (pos + r).max(axis=0)
+    return [g for g in range(model.ngeom) if model.geom_bodyid[g] != 0 and model.geom_group[g] < 3
+            and model.geom_type[g] not in (mujoco.mjtGeom.mjGEOM_PLANE, mujoco.mjtGeom.mjGEOM_HFIELD)]
 
 
-def _xyaxes(forward: np.ndarray) -> np.ndarray:
-    """Camera x and y axes (6) looking along ``forward`` with the world's z up in the image."""
-    f = forward / np.linalg.norm(forward)
-    x = np.cross(f, [0.0, 0.0, 1.0])
-    x = x / np.linalg.norm(x) if np.linalg.norm(x) > 1e-9 else np.array([1.0, 0.0, 0.0])
-    return np.r_[x, np.cross(x, f)]
+def _arm_geoms(model, geoms: list[int], base_body: int) -> list[int]:
+    """Those of ``geoms`` moved by a joint other than the vehicle's own (the arm's)."""
+    moved = np.zeros(model.nbody, dtype=bool)
+    for b in range(1, model.nbody):  # parents come before children in MuJoCo's body order
+        p = int(model.body_parentid[b])
+        moved[b] = moved[p] or (b != base_body and int(model.body_jntnum[b]) > 0 and p != 0)
+    return [g for g in geoms if moved[int(model.geom_bodyid[g])]]
 
 
-def _robot_cameras(lo: np.ndarray, hi: np.ndarray, base_pos: np.ndarray, yaw: float,
-                   fovy: float) -> dict[str, tuple[np.ndarray, np.ndarray]]:
-    """World offsets from the vehicle origin and xyaxes (world) of the two follow cameras,
-    framing the robot's bounding box [lo, hi] (world, at the first sample)."""
-    center = 0.5 * (lo + hi)
-    radius = max(0.5 * float(np.linalg.norm(hi - lo)), 0.2)
-    dist = 1.25 * radius / math.tan(math.radians(fovy) / 2)
-    c, s = math.cos(yaw), math.sin(yaw)
-    rz = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-    out = {}
-    for name, d in (("follow_side", (0.0, -1.0, 0.12)), ("follow_three_quarter", (1.0, 1.0, 0.75))):
-        eye = center + dist * (rz @ (np.asarray(d) / np.linalg.norm(d)))
-        out[name] = (eye - base_pos, _xyaxes(center - eye))
-    return out
+def _framing(model, data, layout, segments: list[tuple[np.ndarray, list[np.ndarray]]]):
+    """(points (N, 3): the corners of the robot's visible geoms' boxes (MuJoCo's ``geom_aabb``,
+    in each geom's frame) and the paths' samples, as offsets from the vehicle origin at the same
+    sample [m, world], over at most ~40 configurations of each segment; the world direction
+    from the vehicle origin to the arm's geoms, summed over the segments' first samples, or the
+    vehicle's x axis without an arm). ``segments``: (q samples (N, nq), paths (N, 3) each) of
+    one log, or of two (a comparison: the result does not depend on their order)."""
+    import mujoco
+
+    geoms = _visible_geoms(model)
+    arm = _arm_geoms(model, geoms, layout.base_body)
+    base, a = layout.base_body, layout.base_qadr
+    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)], dtype=float)
+    aabb = model.geom_aabb[geoms].reshape(-1, 6) if geoms else np.zeros((0, 6))
+    local = aabb[:, None, :3] + signs[None] * aabb[:, None, 3:]  # (G, 8, 3) geom frame
+    out, arm_dir = [np.zeros((1, 3))], np.zeros(3)
+    for q_log, paths in segments:
+        step = max(1, len(q_log) // 40)
+        for k, q in enumerate(np.vstack([q_log[::step], q_log[-1:]])):
+            data.qpos[:] = q
+            mujoco.mj_kinematics(model, data)
+            origin = data.xpos[base].copy()
+            if k == 0:
+                arm_dir = arm_dir + ((data.geom_xpos[arm].mean(axis=0) - origin) if arm
+                                     else data.xmat[base].reshape(3, 3)[:, 0])
+            if geoms:
+                rot = data.geom_xmat[geoms].reshape(-1, 3, 3)
+                world = np.einsum("gij,gkj->gki", rot, local) + (data.geom_xpos[geoms] - origin)[:, None]
+                out.append(world.reshape(-1, 3))
+        step_p = max(1, len(q_log) // 400)
+        for path in paths:  # a path's samples go with q_log's
+            rel = path[::step_p] - q_log[::step_p, a:a + 3]
+            out.append(rel[np.isfinite(rel).all(axis=1)])
+    return np.vstack(out), arm_dir
+
+
+def _robot_cameras(model, data, layout, segments: list, aspect: float) -> dict[str, FollowCamera]:
+    """The :data:`ROBOT_CAMERAS`, framed on the robot and its paths (:mod:`.render_camera`)."""
+    points, arm_dir = _framing(model, data, layout, segments)
+    frame = heading_frame(arm_dir)
+    return {name: fit_camera(points, frame @ np.asarray(DIRECTIONS[name]), FOVY, aspect) for name in ROBOT_CAMERAS}
+
+
+def _water_rgb(depth: float) -> np.ndarray:
+    """Colour of the water (fog and background) at ``depth`` [m]: :data:`_WATER` dimmed by
+    exp(-:data:`_KD` depth) (Beer-Lambert), at least a quarter of it."""
+    return np.asarray(_WATER) * max(math.exp(-_KD * max(depth, 0.0)), 0.25)
 
 
 def _robot_scene_model(robot: dict, q_log: np.ndarray, width: int, height: int,
-                       model_path: str | Path | None = None):
-    """The robot's model plus the replay scene (sea floor, light, water background, the
-    :data:`ROBOT_CAMERAS` on the vehicle body), and the robot's Layout.
+                       model_path: str | Path | None = None, paths: tuple = (), also: tuple | None = None):
+    """The robot's model plus the replay scene (sandy sea floor, lights, water haze, the
+    :data:`ROBOT_CAMERAS` on the vehicle body), the robot's Layout and the cameras
+    (:class:`~.render_camera.FollowCamera` by name).
 
-    ``q_log``: the logged qpos samples (N, nq): the cameras are framed on the first; the floor
-    is :data:`_FLOOR_DEPTH` below the vehicle's start and at least 0.5 m below its lowest point.
+    ``q_log``: the logged qpos samples (N, nq); ``paths``: (N, 3) world paths to keep in view
+    (tip trace, desired tip path). ``also``: (q samples, paths) of another log framed too (a
+    comparison: both halves get the same cameras, so their scale bars agree); ignored when its
+    qpos size differs. The floor is :data:`_FLOOR_DEPTH` below the vehicle's start and at least
+    0.5 m below its lowest point.
     """
     import mujoco
 
     from uvms_mj.plant.params import ParameterError
     from uvms_mj.plant.layout import Layout
     from uvms_mj.plant.robot import compile_robot_spec
-    from uvms_mj.rotations import rpy_from_quat
 
     path = _robot_file(robot, model_path)
     layout_meta = robot.get("layout")
@@ -173,51 +222,68 @@ def _robot_scene_model(robot: dict, q_log: np.ndarray, width: int, height: int,
         raise ValueError(f"the log's q_true has {len(q0)} values per sample, the robot model {path.name} "
                          f"has nq = {plain.nq}: not this robot's log")
     data = mujoco.MjData(plain)
-    lo, hi = _geom_box(plain, data, q0)
+    segments = [(q_log, list(paths))]
+    if also is not None and also[0].ndim == 2 and also[0].shape[1] == plain.nq:
+        segments.append((also[0], list(also[1])))
+    cams = _robot_cameras(plain, data, layout, segments, width / height)
     a = layout.base_qadr
-    yaw = float(rpy_from_quat(q0[a + 3:a + 7])[2]) if np.linalg.norm(q0[a + 3:a + 7]) > 0 else 0.0
-    fovy = 45.0
-    cams = _robot_cameras(lo, hi, q0[a:a + 3], yaw, fovy)
     # Track cameras keep their qpos0 offset from the body (world frame): express the wanted
     # world offset and axes in the body frame at qpos0.
     r0 = np.empty(9)
     mujoco.mju_quat2Mat(r0, plain.qpos0[a + 3:a + 7] / np.linalg.norm(plain.qpos0[a + 3:a + 7]))
     r0 = r0.reshape(3, 3)
     floor_z = min(float(q0[a + 2]) - _FLOOR_DEPTH, float(np.min(q_log[:, a + 2])) - 0.5)
+    depth = -float(q0[a + 2]) - _SURFACE_Z
+    dim = max(math.exp(-_KD * max(depth, 0.0)), 0.25)
 
     def edit(spec) -> None:
-        spec.add_texture(name="uvms_water", type=mujoco.mjtTexture.mjTEXTURE_SKYBOX,
-                         builtin=mujoco.mjtBuiltin.mjBUILTIN_GRADIENT, rgb1=list(_SKY[0]), rgb2=list(_SKY[1]),
-                         width=128, height=768)
-        spec.add_texture(name="uvms_floor", type=mujoco.mjtTexture.mjTEXTURE_2D,
-                         builtin=mujoco.mjtBuiltin.mjBUILTIN_CHECKER, rgb1=list(_FLOOR_RGB[0]),
-                         rgb2=list(_FLOOR_RGB[1]), width=256, height=256)
-        mat = spec.add_material(name="uvms_floor", texrepeat=[25, 25])
-        mat.textures[mujoco.mjtTextureRole.mjTEXROLE_RGB] = "uvms_floor"
-        spec.worldbody.add_geom(name="uvms_floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[50.0, 50.0, 0.1],
-                                pos=[float(q0[a]), float(q0[a + 1]), floor_z], material="uvms_floor",
+        # sand: one flat, low-contrast colour, no texture (a texture costs about 6 ms per 640x480
+        # frame in llvmpipe: a quarter of the frame); the lights and the haze shade it. size[2]:
+        # the spacing of the plane's grid [m], at whose vertices the lights are evaluated.
+        spec.add_material(name="uvms_sand", rgba=[*_SAND, 1.0], specular=0.0, shininess=0.0,
+                                reflectance=0.0)
+        spec.worldbody.add_geom(name="uvms_floor", type=mujoco.mjtGeom.mjGEOM_PLANE, size=[40.0, 40.0, 2.0],
+                                pos=[float(q0[a]), float(q0[a + 1]), floor_z], material="uvms_sand",
                                 contype=0, conaffinity=0, group=0)
+        # daylight from above, dimmed by the depth; and a point light at the surface above the
+        # start whose attenuation darkens what lies deeper (the floor more than the vehicle)
         spec.worldbody.add_light(name="uvms_sun", type=mujoco.mjtLightType.mjLIGHT_DIRECTIONAL,
-                                 pos=[0.0, 0.0, 10.0], dir=[0.3, 0.2, -1.0], diffuse=[0.6, 0.6, 0.6],
-                                 castshadow=False)
+                                 pos=[0.0, 0.0, 10.0], dir=[0.25, 0.15, -1.0], diffuse=list(dim * _SUN),
+                                 ambient=[0.0, 0.0, 0.0], specular=[0.0, 0.0, 0.0], castshadow=False)
+        spec.worldbody.add_light(name="uvms_surface", type=mujoco.mjtLightType.mjLIGHT_POINT,
+                                 pos=[float(q0[a]), float(q0[a + 1]), _SURFACE_Z + 1.0],
+                                 diffuse=list(_SURFACE_LIGHT), ambient=[0.0, 0.0, 0.0], specular=[0.1, 0.1, 0.1],
+                                 attenuation=[1.0, _SURFACE_ATTENUATION, 0.0], castshadow=False)
         body = spec.body(layout.base_name)
-        for name, (offset, axes) in cams.items():
-            local = np.r_[r0.T @ axes[:3], r0.T @ axes[3:]]
-            body.add_camera(name=name, mode=mujoco.mjtCamLight.mjCAMLIGHT_TRACK, pos=list(r0.T @ offset),
-                            xyaxes=list(local), fovy=fovy)
+        for name, cam in cams.items():
+            local = np.r_[r0.T @ cam.xyaxes[:3], r0.T @ cam.xyaxes[3:]]
+            body.add_camera(name=name, mode=mujoco.mjtCamLight.mjCAMLIGHT_TRACK, pos=list(r0.T @ cam.offset),
+                            xyaxes=list(local), fovy=cam.fovy)
 
     try:
         model = compile_robot_spec(path, edit=edit)
     except ParameterError as exc:
         raise ValueError(f"the log's robot model {path}: {exc}") from None
-    model.vis.global_.offwidth = max(int(model.vis.global_.offwidth), width)
-    model.vis.global_.offheight = max(int(model.vis.global_.offheight), height)
-    # water haze: fog from 4 m to 25 m [MuJoCo's unit: the model's extent]
-    model.vis.map.fogstart = 4.0 / max(float(model.stat.extent), 1e-6)
-    model.vis.map.fogend = 25.0 / max(float(model.stat.extent), 1e-6)
-    model.vis.rgba.fog = (*_SKY[0], 1.0)
-    return model, layout
-
+    vis = model.vis
+    vis.global_.offwidth = max(int(vis.global_.offwidth), width)
+    vis.global_.offheight = max(int(vis.global_.offheight), height)
+    # Software rasterizer (llvmpipe): no multisampling (4 samples cost 3x the frame) and no
+    # shadow map (no light casts shadows); headlight dim (a camera-side lamp).
+    vis.quality.offsamples = 0
+    vis.quality.shadowsize = 0
+    # Fewer facets per cylinder, capsule, sphere and ellipsoid (MuJoCo's defaults 28 x 16): the
+    # frame is vertex-bound in software (75 primitive geoms: 32 ms at 28 x 16, 20 ms at 16 x 8).
+    vis.quality.numslices = min(int(vis.quality.numslices), _FACETS[0])
+    vis.quality.numstacks = min(int(vis.quality.numstacks), _FACETS[1])
+    vis.headlight.ambient = list(_HEADLIGHT[0])
+    vis.headlight.diffuse = list(_HEADLIGHT[1])
+    vis.headlight.specular = [0.0, 0.0, 0.0]
+    # water haze [MuJoCo's unit: the model's extent]
+    extent = max(float(model.stat.extent), 1e-6)
+    vis.map.fogstart = _FOG[0] / extent
+    vis.map.fogend = _FOG[1] / extent
+    vis.rgba.fog = (*_water_rgb(depth), 1.0)
+    return model, layout, cams
 
 def _finite_rows(x: np.ndarray | None, n: int, width: int) -> np.ndarray | None:
     """A (n, width) signal, or None when it is missing, misshapen or never finite."""
@@ -226,13 +292,30 @@ def _finite_rows(x: np.ndarray | None, n: int, width: int) -> np.ndarray | None:
     return x
 
 
+def _framed_motion(log, max_seconds: float | None, speed: float):
+    """(q_true rows, [tip_true, tip_desired] rows) of ``log`` that a video of it would show
+    (finite samples up to ``max_seconds`` of video), or None without q_true."""
+    ts = np.asarray(log.t, dtype=float).ravel()
+    q = _signal(log, "q_true")
+    if q is None or q.ndim != 2 or len(q) != len(ts):
+        return None
+    ok = np.isfinite(ts) & np.isfinite(q).all(axis=1)
+    if max_seconds is not None and ok.any():
+        ok &= ts <= ts[ok][0] + float(max_seconds) * speed + 1e-9
+    if not ok.any():
+        return None
+    paths = [p[ok] for p in (_finite_rows(_signal(log, n), len(ts), 3) for n in ("tip_true", "tip_desired"))
+             if p is not None]
+    return q[ok], paths
+
+
 class _RobotReplay:
     """Replay of a robot log (:func:`robot_of`): the robot's own model in a water scene,
     followed by a tracking camera; same interface as :class:`_Replay`."""
 
     def __init__(self, log, robot: dict, fps: float, size: tuple[int, int], camera: str | int | None,
                  speed: float, max_seconds: float | None, clock: bool, labels: bool = True,
-                 title: str | None = None, model_path: str | Path | None = None) -> None:
+                 title: str | None = None, model_path: str | Path | None = None, frame_also=None) -> None:
         import mujoco
 
         width, height = _check_size(size, fps, speed)
@@ -255,10 +338,16 @@ class _RobotReplay:
         self.ts, self.speed, self.clock, self.height = ts, speed, clock, height
         self.frame_t = _frame_times(ts, fps, speed, max_seconds)
 
-        model, layout = self.model, self.layout = _robot_scene_model(robot, q_log, width, height, model_path)
+        # framed: the part of the log (and of frame_also's) in the video, found the same way for both
+        own = _framed_motion(log, max_seconds, speed)
+        also = _framed_motion(frame_also, max_seconds, speed) if frame_also is not None else None
+        model, layout, cams = _robot_scene_model(robot, own[0], width, height, model_path, paths=tuple(own[1]),
+                                                 also=also)
+        self.model, self.layout = model, layout
         self.data = mujoco.MjData(model)
         self.qs = interp_qpos(self.frame_t, ts, q_log, _quat_slots(model))
         self.cam = self._camera(model, camera)
+        follow = cams.get(model.camera(self.cam).name)
         a = layout.base_qadr
         trace_label = "tip trace"
         if tip is None:  # no tip site (or none logged): trace the vehicle origin
@@ -271,13 +360,21 @@ class _RobotReplay:
         if desired is not None:
             d_ok = desired[np.isfinite(desired).all(axis=1)]
             self.desired_pts = d_ok[_thin(_simplify(d_ok, _TRACE_TOL), 300)]
+        #: image scale at the vehicle's distance [px/m] (None for a camera of the model)
+        self.px_per_m = px_per_metre(follow, height) if follow is not None else None
         self.overlay = None
         if labels:
             self.overlay = _labels_overlay(width, height, title if title is not None else _controller_name(log),
-                                           None, legend=True, trace_label=trace_label,
-                                           desired_label="desired tip path" if desired is not None else None)
+                                           self.px_per_m, legend=True, trace_label=trace_label,
+                                           desired_label="desired tip path" if desired is not None else None,
+                                           scale_note="at the vehicle")
         self.renderer = _make_renderer(model, height, width)
         self.renderer.scene.flags[mujoco.mjtRndFlag.mjRND_FOG] = True
+        self.renderer.scene.flags[mujoco.mjtRndFlag.mjRND_SKYBOX] = False
+        extent = max(float(model.stat.extent), 1e-6)
+        self.backdrop_dist = 1.02 * float(model.vis.map.fogend) * extent
+        self.backdrop_half = 1.5 * self.backdrop_dist * math.tan(math.radians(float(model.cam_fovy[self.cam])) / 2) \
+            * max(width / height, 1.0)
 
     @staticmethod
     def _camera(model, camera: str | int | None) -> int:
@@ -299,6 +396,25 @@ class _RobotReplay:
     def __len__(self) -> int:
         return len(self.frame_t)
 
+    def _add_backdrop(self, scene) -> None:
+        """The water behind everything: a plane facing the eye just beyond the fog's end (so it
+        shows the fog colour), instead of a skybox (a full-screen textured sphere costs about
+        11 ms per 640x480 frame in llvmpipe, the plane about 1.5 ms)."""
+        import mujoco
+
+        if scene.ngeom >= scene.maxgeom:
+            return
+        cam = scene.camera[0]
+        fwd, up = np.asarray(cam.forward, dtype=float), np.asarray(cam.up, dtype=float)
+        eye = 0.5 * (np.asarray(scene.camera[0].pos) + np.asarray(scene.camera[1].pos))
+        rot = np.column_stack([np.cross(fwd, up), up, -fwd])
+        g = scene.geoms[scene.ngeom]
+        half = self.backdrop_half
+        mujoco.mjv_initGeom(g, mujoco.mjtGeom.mjGEOM_PLANE, np.array([half, half, half]),
+                            eye + self.backdrop_dist * fwd, rot.ravel(), _RGBA_BACKDROP)
+        g.category = mujoco.mjtCatBit.mjCAT_DECOR
+        scene.ngeom += 1
+
     def __iter__(self) -> Iterator[tuple[float, np.ndarray]]:
         ts, tip, renderer = self.ts, self.tip, self.renderer
         scene = renderer.scene
@@ -308,11 +424,14 @@ class _RobotReplay:
             self.data.qpos[:] = q
             _pose(self.model, self.data)
             renderer.update_scene(self.data, camera=self.cam)
+            self._add_backdrop(scene)
             if self.desired_pts is not None:
-                _add_polyline(scene, self.desired_pts, _RGBA_DESIRED, 2.0)
+                # thin, 1 cm nearer the eye than the trace: both stay visible where they overlap
+                near = -0.01 * np.asarray(scene.camera[0].forward, dtype=float)
+                _add_polyline(scene, self.desired_pts + near, _RGBA_DESIRED, 2.0)
                 now = np.array([np.interp(tf, ts, self.desired[:, j]) for j in range(3)])
                 if np.isfinite(now).all():
-                    _add_sphere(scene, now, 0.012, _RGBA_DESIRED)
+                    _add_sphere(scene, now + near, 0.012, _RGBA_DESIRED)
             if len(good):
                 k = int(np.searchsorted(good_t, tf, side="right"))
                 now = np.array([np.interp(tf, good_t, good[:, j]) for j in range(3)])

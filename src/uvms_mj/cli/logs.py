@@ -24,7 +24,8 @@ from uvms_mj.io.interrupts import partial_output
 @click.option("--labels/--no-labels", default=True, show_default=True,
               help="Controller name, legend and scale bar on the frames.")
 @click.option("--camera", default=None, metavar="NAME",
-              help="A camera of the scene by name. Robot logs: follow_three_quarter (default) or follow_side; "
+              help="A camera of the scene by name. Robot logs: follow_arm (default: vehicle and arm, from the arm's "
+                   "side), follow_three_quarter or follow_side; "
                    "paper logs: the fitted side view by default, or side / track.")
 def render(logs: tuple[str, ...], out: str | None, out_old: str | None, compare: bool, fps: int,
            size: tuple[int, int] | None, labels: bool, camera: str | None) -> None:
