@@ -284,7 +284,7 @@ def _norm_panel(a: Axes, series: list[tuple[str, str, np.ndarray, np.ndarray]], 
     _finish(a, f"|error| [{unit}]", title + (" (log scale)" if log_scale else ""), legend=False, zero=not log_scale)
     if log_scale:
         a.set_yscale("log")
-    if a.lines:
+    if series:
         a.legend(fontsize=8, loc="best", framealpha=0.85)
         if missing:
             a.text(0.99, 0.02, "not logged: " + ", ".join(missing), ha="right", va="bottom", transform=a.transAxes,
