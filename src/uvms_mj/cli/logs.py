@@ -130,13 +130,17 @@ def export(log: str, fmt: str, layout: str, out: str | None, columns: str) -> No
         _check_dir(targets[0].parent, option="-o/--out")
     for p in targets:
         _check_out(p, protect=(log,), kind=OUTPUT_KIND[fmt], option="-o/--out")
-    run_log = _read(log)
-    try:
-        paths = export_log(run_log, fmt, out, layout=layout, log_path=log, columns=columns)
+    try:  # the log is read by blocks as the output is written (its memory does not grow with the log)
+        paths = export_log(log, fmt, out, layout=layout, log_path=log, columns=columns)
     except ExportError as exc:
         click.echo(f"error: {exc}", err=True)
         sys.exit(2)
     except OSError as exc:
         _io_error(getattr(exc, "filename", None) or out or log, exc)
+    except (MemoryError, RecursionError) as exc:
+        raise click.UsageError(f"{log}: not a readable uvms-mj MCAP log ({type(exc).__name__})") from None
+    except Exception as exc:  # noqa: BLE001 - McapError, struct, zstd, JSON... any malformed file (as _read)
+        raise click.UsageError(f"{log}: not a readable uvms-mj MCAP log ({type(exc).__name__}: "
+                               f"{str(exc)[:200]})") from None
     for p in paths:
         click.echo(f"{fmt}: {p}")
