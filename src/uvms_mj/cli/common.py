@@ -186,12 +186,13 @@ def _load(path: str, sets: tuple[str, ...]):
         raise click.UsageError(str(exc)) from None
 
 
-def _read(path) -> object:
-    """read_log with bad files turned into a usage error (exit 2), never a traceback."""
+def _read(path, signals=None) -> object:
+    """read_log with bad files turned into a usage error (exit 2), never a traceback; ``signals``:
+    read only those (read_log's subset: what a plot or a video needs of a long log)."""
     from uvms_mj.io.recorder import read_log
 
     try:
-        return read_log(path)
+        return read_log(path, signals=signals)
     except (MemoryError, RecursionError) as exc:
         raise click.UsageError(f"{path}: not a readable uvms-mj MCAP log ({type(exc).__name__})") from None
     except Exception as exc:  # noqa: BLE001 - McapError, struct, zstd, JSON... any malformed file

@@ -10,6 +10,11 @@ import click
 from uvms_mj.cli.common import EXIT_RENDER, _check_dir, _check_out, _io_error, _progress, _read
 from uvms_mj.io.interrupts import partial_output
 
+#: The signals a video reads of a log (uvms_mj.analysis.render*: the replayed q_true, the tip's
+#: trace and desired path, the overlay's and the compare inset's errors): ``render`` and
+#: ``run --video`` read only these (read_log's subset), so a long log's other signals never load.
+RENDER_SIGNALS = ("q_true", "p_desired", "tip_true", "tip_desired", "base_desired", "e_p", "e_position")
+
 
 @click.command()
 @click.argument("logs", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False), metavar="LOG [LOG_B]")
@@ -42,7 +47,7 @@ def render(logs: tuple[str, ...], out: str | None, out_old: str | None, compare:
     else:
         path = Path(out) if out else first.with_suffix(".mp4")
     _check_out(path, protect=logs, kind="video", option="--out")
-    runs = [_read(p) for p in logs]
+    runs = [_read(p, RENDER_SIGNALS) for p in logs]
     try:
         with _progress(f"render {path.name}", "frame") as tick, partial_output(path):
             if compare:
@@ -67,13 +72,13 @@ def render(logs: tuple[str, ...], out: str | None, out_old: str | None, compare:
 @click.option("-o", "out_dir_old", type=click.Path(file_okay=False), default=None, hidden=True)
 def plot(log: str, out_dir: str | None, out_dir_old: str | None) -> None:
     """Paper-style time histories (Figs. 5 and 6) and control signals of LOG, as PNG."""
-    from uvms_mj.analysis.plots import plot_run, plot_run_paths
+    from uvms_mj.analysis.plots import PLOT_SIGNALS, plot_run, plot_run_paths
 
     out_dir = out_dir or out_dir_old
     folder = _check_dir(Path(out_dir) if out_dir else Path(log).parent)
     for p in plot_run_paths(folder, Path(log).stem):
         _check_out(p, protect=(log,), kind="plot", option="--out-dir")
-    run_log = _read(log)
+    run_log = _read(log, PLOT_SIGNALS)
     try:
         folder.mkdir(parents=True, exist_ok=True)
         paths = plot_run(run_log, folder, stem=Path(log).stem)

@@ -86,12 +86,13 @@ def _live_server(port: int, pace: str, wait: float):
 def _plots(log_path: Path, echo=click.echo, data=None, protect: tuple = ()) -> None:
     """The plots of a run's log (``data``: the run itself, which holds the log's signals, else the
     log is read); a run too short (or too broken) to plot gets a warning."""
-    from uvms_mj.analysis.plots import plot_run, plot_run_paths
+    from uvms_mj.analysis.plots import PLOT_SIGNALS, plot_run, plot_run_paths
 
     for p in plot_run_paths(log_path.parent, log_path.stem):
         _check_out(p, protect=protect, kind="plot", option="--plots")
     try:
-        paths = plot_run(data if data is not None else _read(log_path), log_path.parent, stem=log_path.stem)
+        paths = plot_run(data if data is not None else _read(log_path, PLOT_SIGNALS), log_path.parent,
+                         stem=log_path.stem)
     except OSError as exc:
         _io_error(log_path.parent, exc)
     except (ValueError, KeyError, IndexError, TypeError) as exc:
@@ -110,7 +111,9 @@ def _default_log(scenario, out: str | None, controller: str) -> Path:
 
 
 def _video(log_path: Path, video_path: Path, scenario=None, echo=click.echo, protect: tuple = ()) -> None:
-    log = _read(log_path)
+    from uvms_mj.cli.logs import RENDER_SIGNALS
+
+    log = _read(log_path, RENDER_SIGNALS)
     kw = {}
     if scenario is not None:
         kw = {"fps": scenario.outputs.video_fps, "size": tuple(scenario.outputs.video_size)}
@@ -213,7 +216,7 @@ def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str
     out_dir = out_dir or out_dir_old or "logs"
     echo = _json_dest(json_out == "-")
     from uvms_mj.control import available
-    from uvms_mj.analysis.plots import plot_comparison
+    from uvms_mj.analysis.plots import COMPARE_SIGNALS, plot_comparison
 
     names = [c.strip() for c in controllers.split(",") if c.strip()]
     unknown = [c for c in names if c not in available()]
@@ -255,7 +258,7 @@ def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str
     if json_out:
         _write_json(_json_metrics(runs, base.name), json_out)
     try:
-        fig = plot_comparison({n: _read(p) for n, p in logs.items()}, figure)
+        fig = plot_comparison({n: _read(p, COMPARE_SIGNALS) for n, p in logs.items()}, figure)
         echo(f"figure: {fig}")
     except OSError as exc:
         _io_error(figure, exc)

@@ -31,7 +31,16 @@ import numpy as np
 from uvms_mj.analysis.plots.paper import _plot_paper_comparison, _plot_paper_run, tracking_errors
 from uvms_mj.analysis.plots.robot import _plot_robot_comparison, _plot_robot_run, _robot, attitude_error, robot_errors
 
-__all__ = ["attitude_error", "plot_run", "plot_run_paths", "plot_comparison", "robot_errors", "tracking_errors"]
+__all__ = ["COMPARE_SIGNALS", "PLOT_SIGNALS", "attitude_error", "plot_run", "plot_run_paths", "plot_comparison",
+           "robot_errors", "tracking_errors"]
+
+#: The signals :func:`plot_comparison` reads (:func:`tracking_errors`, :func:`robot_errors`): a log
+#: read for the comparison needs only these (``read_log(path, signals=COMPARE_SIGNALS)``).
+COMPARE_SIGNALS = ("q_true", "p_desired", "tip_true", "base_desired", "tip_desired", "e_position", "e_attitude")
+#: The signals :func:`plot_run` reads (paper and robot figures): ``read_log(path, signals=PLOT_SIGNALS)``
+#: gives a log that plots the same figures with only these in memory (tests/test_memory.py checks the list).
+PLOT_SIGNALS = COMPARE_SIGNALS + ("singular_phase", "thrust_command", "thrust_force", "thrust_saturated", "torques",
+                                  "torques_applied", "f_E_hat", "det_B", "joints_desired", "wrench_body")
 
 
 def plot_run_paths(out_dir: str | Path, stem: str = "run") -> list[Path]:
