@@ -427,6 +427,7 @@ class _Spy(dict):
         return super().get(k, default)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("which", ["paper", "robot"])
 def test_the_plot_signal_lists_cover_what_the_figures_read(logs, tmp_path, which):
     from uvms_mj.analysis.plots import COMPARE_SIGNALS, PLOT_SIGNALS, plot_comparison, plot_run
@@ -462,3 +463,19 @@ def test_plot_and_render_commands_read_a_subset(logs, tmp_path, monkeypatch):
     result = CliRunner().invoke(main, ["render", str(logs["robot"]), "-o", str(tmp_path / "v.mp4")])
     assert result.exit_code == 0, result.output
     assert got["render"] and got["render"] <= set(RENDER_SIGNALS) and "q_true" in got["render"]
+
+
+@pytest.mark.parametrize("which", ["paper", "robot"])
+def test_compare_figure_from_paths_keeps_only_the_error_columns(logs, tmp_path, which):
+    """plot_comparison given paths reads each log itself, keeping the few columns its errors need,
+    and draws the figure the logs read in full give (the same PNG bytes: the same data drawn)."""
+    from uvms_mj.analysis import plots
+    from uvms_mj.io.reader import read_log
+
+    slim = plots._slim(str(logs[which]))
+    full = read_log(logs[which])
+    assert slim.signals["q_true"].shape[1] == (7 if which == "robot" else 3)
+    assert set(slim.signals) <= set(plots.COMPARE_SIGNALS) and len(slim.signals) <= 4
+    a = plots.plot_comparison({"x": full, "y": full}, tmp_path / "a.png")
+    b = plots.plot_comparison({"x": str(logs[which]), "y": logs[which]}, tmp_path / "b.png")
+    assert a.read_bytes() == b.read_bytes()
