@@ -10,6 +10,11 @@ import click
 from uvms_mj.cli.common import EXIT_RENDER, _check_dir, _check_out, _io_error, _progress, _read
 from uvms_mj.io.interrupts import partial_output
 
+#: The signals a video reads of a log (uvms_mj.analysis.render*: the replayed q_true, the tip's
+#: trace and desired path, the overlay's and the compare inset's errors): ``render`` and
+#: ``run --video`` read only these (read_log's subset), so a long log's other signals never load.
+RENDER_SIGNALS = ("q_true", "p_desired", "tip_true", "tip_desired", "base_desired", "e_p", "e_position")
+
 
 @click.command()
 @click.argument("logs", nargs=-1, required=True, type=click.Path(exists=True, dir_okay=False), metavar="LOG [LOG_B]")
@@ -43,7 +48,7 @@ def render(logs: tuple[str, ...], out: str | None, out_old: str | None, compare:
     else:
         path = Path(out) if out else first.with_suffix(".mp4")
     _check_out(path, protect=logs, kind="video", option="--out")
-    runs = [_read(p) for p in logs]
+    runs = [_read(p, RENDER_SIGNALS) for p in logs]
     try:
         with _progress(f"render {path.name}", "frame") as tick, partial_output(path):
             if compare:
@@ -68,13 +73,13 @@ def render(logs: tuple[str, ...], out: str | None, out_old: str | None, compare:
 @click.option("-o", "out_dir_old", type=click.Path(file_okay=False), default=None, hidden=True)
 def plot(log: str, out_dir: str | None, out_dir_old: str | None) -> None:
     """Paper-style time histories (Figs. 5 and 6) and control signals of LOG, as PNG."""
-    from uvms_mj.analysis.plots import plot_run, plot_run_paths
+    from uvms_mj.analysis.plots import PLOT_SIGNALS, plot_run, plot_run_paths
 
     out_dir = out_dir or out_dir_old
     folder = _check_dir(Path(out_dir) if out_dir else Path(log).parent)
     for p in plot_run_paths(folder, Path(log).stem):
         _check_out(p, protect=(log,), kind="plot", option="--out-dir")
-    run_log = _read(log)
+    run_log = _read(log, PLOT_SIGNALS)
     try:
         folder.mkdir(parents=True, exist_ok=True)
         paths = plot_run(run_log, folder, stem=Path(log).stem)
@@ -128,19 +133,26 @@ def export(log: str, fmt: str, layout: str, out: str | None, columns: str) -> No
     in CSV. npz and mat keep the logged shapes and add meta_json (metadata and status) and
     columns_json (the component names). See uvms_mj.io.export."""
     from uvms_mj.io.export import OUTPUT_KIND, ExportError, export_log, export_paths
+    from uvms_mj.io.logfile import LogFileError
 
     targets = export_paths(fmt, out, layout, log)
     if layout == "channels" and fmt in ("csv", "parquet"):
         _check_dir(targets[0].parent, option="-o/--out")
     for p in targets:
         _check_out(p, protect=(log,), kind=OUTPUT_KIND[fmt], option="-o/--out")
-    run_log = _read(log)
-    try:
-        paths = export_log(run_log, fmt, out, layout=layout, log_path=log, columns=columns)
+    try:  # the log is read by blocks as the output is written (its memory does not grow with the log)
+        paths = export_log(log, fmt, out, layout=layout, log_path=log, columns=columns)
     except ExportError as exc:
         click.echo(f"error: {exc}", err=True)
         sys.exit(2)
+    except LogFileError as exc:  # a FIFO, a foreign, empty or magic-only file (io/logfile.py)
+        raise click.UsageError(str(exc)) from None
     except OSError as exc:
         _io_error(getattr(exc, "filename", None) or out or log, exc)
+    except (MemoryError, RecursionError) as exc:
+        raise click.UsageError(f"{log}: not a readable uvms-mj MCAP log ({type(exc).__name__})") from None
+    except Exception as exc:  # noqa: BLE001 - McapError, struct, zstd, JSON... any malformed file (as _read)
+        raise click.UsageError(f"{log}: not a readable uvms-mj MCAP log ({type(exc).__name__}: "
+                               f"{str(exc)[:200]})") from None
     for p in paths:
         click.echo(f"{fmt}: {p}")

@@ -137,7 +137,12 @@ def component_names(log) -> dict[str, list[str] | None]:
     module docstring."""
     meta = getattr(log, "meta", None) or {}
     lay = robot_layout(meta)
-    controller = str(meta.get("controller", ""))
+    controller = meta.get("controller")
+    if not controller:  # a log read as a stream: the status record (with "controller") comes last
+        scenario = meta.get("scenario")
+        ctrl = scenario.get("controller") if isinstance(scenario, Mapping) else None
+        controller = ctrl.get("name") if isinstance(ctrl, Mapping) else ""
+    controller = str(controller or "")
     out: dict[str, list[str] | None] = {}
     for signal, arr in log.signals.items():
         a = np.asarray(arr)

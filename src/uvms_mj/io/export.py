@@ -38,9 +38,11 @@ Parquet needs pyarrow, mat scipy, DataFrames pandas: ``pip install 'uvms-mj[expo
 
 from __future__ import annotations
 
+import contextlib
 import json
 import re
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
@@ -159,22 +161,143 @@ def _require(module: str, fmt: str):
             from None
 
 
-def _write_csv(cols: dict[str, np.ndarray], path: Path) -> None:
-    names = list(cols)
-    data = np.column_stack([np.asarray(c, dtype=float) for c in cols.values()])
-    with atomic_open(path, "w", encoding="utf-8", newline="") as f:
-        f.write(",".join(f'"{n}"' if "," in n else n for n in names) + "\n")
-        for row in data:
-            f.write(",".join("" if np.isnan(v) else repr(float(v)) for v in row) + "\n")
+class _CsvTable:
+    """A CSV table written block by block (the header with the first block)."""
+
+    def __init__(self, f) -> None:
+        self._f, self._names = f, None
+
+    def add(self, cols: dict[str, np.ndarray]) -> None:
+        if self._names is None:
+            self._names = list(cols)
+            self._f.write(",".join(f'"{n}"' if "," in n else n for n in self._names) + "\n")
+        if not len(cols["t"]):
+            return
+        data = np.column_stack([np.asarray(c, dtype=float) for c in cols.values()])
+        self._f.write("".join(",".join("" if np.isnan(v) else repr(float(v)) for v in row) + "\n"
+                              for row in data.tolist()))
 
 
-def _write_parquet(cols: dict[str, np.ndarray], path: Path, meta: str, names: str) -> None:
-    pa = _require("pyarrow", "parquet")
-    pq = _require("pyarrow.parquet", "parquet")
-    table = pa.table({k: np.asarray(v) for k, v in cols.items()})
-    table = table.replace_schema_metadata({"uvms_mj": meta, "uvms_mj_columns": names})
+class _ParquetTable:
+    """A Parquet file written block by block: one row group per block, the first block's column
+    types. Its key-value metadata (``uvms_mj``: the metadata and status, known once the log is read
+    to its end; ``uvms_mj_columns``) is written at close, in the footer, where readers take the
+    schema's metadata from (the Arrow schema is not stored: the columns are plain numbers and
+    booleans, which Parquet's own types give back)."""
+
+    def __init__(self, path: Path, names: str) -> None:
+        self._pa = _require("pyarrow", "parquet")
+        self._pq = _require("pyarrow.parquet", "parquet")
+        self._path, self._names, self._writer, self._schema = path, names, None, None
+
+    def add(self, cols: dict[str, np.ndarray]) -> None:
+        table = self._pa.table({k: np.asarray(v) for k, v in cols.items()})
+        if self._writer is None:
+            self._schema = table.schema
+            self._writer = self._pq.ParquetWriter(str(self._path), self._schema, store_schema=False)
+        if table.num_rows:
+            self._writer.write_table(table.cast(self._schema))
+
+    def close(self, meta: str) -> None:
+        if self._writer is not None:
+            self._writer.add_key_value_metadata({"uvms_mj": meta, "uvms_mj_columns": self._names})
+            self._writer.close()
+            self._writer = None
+
+
+class _Spool:
+    """Arrays of a known row layout gathered block by block in raw files of a temporary folder
+    (next to the output: the same disk), read back one array at a time: what bounds the memory of
+    the npz and mat exports (one array, not the whole log)."""
+
+    def __init__(self, folder: Path) -> None:
+        self._dir = folder
+        self._arrays: dict[str, list] = {}  # key -> [file, dtype, row shape, rows]
+
+    def add(self, key: str, arr: np.ndarray) -> None:
+        arr = np.ascontiguousarray(arr)
+        ent = self._arrays.get(key)
+        if ent is None:
+            ent = self._arrays[key] = [open(self._dir / f"{len(self._arrays)}.raw", "wb"), arr.dtype, arr.shape[1:], 0]
+        if arr.shape[1:] != ent[2]:
+            raise ValueError(f"{key}: rows of shape {arr.shape[1:]} after rows of shape {ent[2]}")
+        ent[0].write(arr.astype(ent[1], copy=False).tobytes())
+        ent[3] += len(arr)
+
+    def keys(self) -> list[str]:
+        return list(self._arrays)
+
+    def header(self, key: str) -> dict:
+        _, dtype, shape, rows = self._arrays[key]
+        return {"descr": np.lib.format.dtype_to_descr(dtype), "fortran_order": False, "shape": (rows,) + shape}
+
+    def copy_to(self, key: str, dest, piece: int = 1 << 22) -> None:
+        """The raw bytes of ``key`` into ``dest`` (a file), ``piece`` bytes at a time."""
+        f = self._arrays[key][0]
+        f.flush()
+        with open(f.name, "rb") as src:
+            while True:
+                data = src.read(piece)
+                if not data:
+                    break
+                dest.write(data)
+
+    def load(self, key: str) -> np.ndarray:
+        f, dtype, shape, rows = self._arrays[key]
+        f.flush()
+        return np.fromfile(f.name, dtype=dtype).reshape((rows,) + shape)
+
+    def close(self) -> None:
+        for ent in self._arrays.values():
+            ent[0].close()
+
+
+def _write_npz(spool: _Spool, extra: dict[str, str], path: Path) -> None:
+    """As ``np.savez_compressed`` (members ``<key>.npy``, deflated, zip64): the text arrays of
+    ``extra`` first, then each spooled array streamed into its member."""
+    import zipfile
+
+    with atomic_open(path, "wb") as f, zipfile.ZipFile(f, "w", compression=zipfile.ZIP_DEFLATED, allowZip64=True) as zf:
+        for key, text in extra.items():
+            with zf.open(key + ".npy", "w", force_zip64=True) as m:
+                np.lib.format.write_array(m, np.array(text), allow_pickle=False)
+        for key in spool.keys():
+            with zf.open(key + ".npy", "w", force_zip64=True) as m:
+                hdr = spool.header(key)
+                big = len(repr(hdr)) > 60000  # a version 1.0 header holds at most 65535 bytes
+                (np.lib.format.write_array_header_2_0 if big else np.lib.format.write_array_header_1_0)(m, hdr)
+                spool.copy_to(key, m)
+
+
+def _write_mat(spool: _Spool, extra: dict[str, str], path: Path, layout: str, groups: dict[str, list[str]]) -> None:
+    """As ``scipy.io.savemat(..., do_compression=True, oned_as="column")``, one variable (wide:
+    one array; channels: one channel's struct) in memory at a time."""
+    sio = _require("scipy.io", "mat")
+    try:
+        from scipy.io.matlab._mio5 import MatFile5Writer
+    except ImportError:  # another scipy layout: one savemat of every variable
+        MatFile5Writer = None
+    keys = spool.keys()
+    variables: list[tuple[str, Any]] = list(extra.items())
+    if layout == "wide":
+        variables += [(_mat_name(k), lambda k=k: spool.load(k)) for k in keys]
+    else:
+        for table in groups:
+            mine = [k for k in keys if k.split("/")[0] == table]
+            variables.append((table, lambda mine=mine: {_mat_name(k.split("/", 1)[1]): spool.load(k) for k in mine}))
+
+    def value(v):
+        return v() if callable(v) else v
+
     with atomic_path(path) as tmp:
-        pq.write_table(table, str(tmp))
+        if MatFile5Writer is None:
+            sio.savemat(str(tmp), {k: value(v) for k, v in variables}, appendmat=False, do_compression=True,
+                        oned_as="column")
+            return
+        with open(tmp, "wb") as f:
+            writer = MatFile5Writer(f, do_compression=True, unicode_strings=True, oned_as="column")
+            for n, (name, v) in enumerate(variables):
+                writer.put_variables({name: value(v)}, write_header=n == 0)
 
 
 def _mat_name(name: str) -> str:
@@ -193,10 +316,33 @@ def export_paths(fmt: str, out: str | Path | None = None, layout: str = "wide",
     return [folder / f"{name}.{fmt}" for name in CHANNEL_TABLES.values()]
 
 
+def _blocks_of(log, chunk: int):
+    """An in-memory log (a RunResult, a read_log result) as blocks of ``chunk`` samples."""
+    from uvms_mj.io.reader import SampleBlock
+
+    t = np.asarray(log.t, dtype=float)
+    n = len(t)
+    sig = {k: np.asarray(v) for k, v in log.signals.items()}
+    for a in range(0, max(n, 1), chunk):
+        yield SampleBlock(t=t[a:a + chunk], signals={k: v[a:a + chunk] for k, v in sig.items()})
+
+
+#: Samples per block of an export (memory: a block's arrays and its messages, a few MB).
+EXPORT_CHUNK = 4096
+
+
 def export_log(log, fmt: str, out: str | Path | None = None, layout: str = "wide",
-               log_path: str | Path | None = None, columns: str = "named") -> list[Path]:
-    """Write ``log`` (a :func:`~uvms_mj.io.recorder.read_log` result) in ``fmt``; returns the files.
-    ``columns``: "named" (by the robot's layout, index where unknown) or "index".
+               log_path: str | Path | None = None, columns: str = "named", chunk: int = EXPORT_CHUNK) -> list[Path]:
+    """Write ``log`` in ``fmt``; returns the files. ``log``: a path to an MCAP log (read by blocks
+    of ``chunk`` samples, :func:`uvms_mj.io.reader.iter_samples`: the memory does not grow with
+    the log's length) or an in-memory log (a :func:`~uvms_mj.io.recorder.read_log` result, a
+    RunResult; written by the same blocks). ``columns``: "named" (by the robot's layout, index
+    where unknown) or "index".
+
+    Memory: csv and parquet are written block by block (parquet: a row group per block); npz and
+    mat gather the blocks in raw files in a temporary folder next to the output (as much disk as
+    the uncompressed arrays, removed at the end) and write one array at a time (mat with
+    ``layout="channels"``: one channel's struct at a time).
 
     Raises:
         ExportError: parquet without pyarrow, mat without scipy.
@@ -206,54 +352,133 @@ def export_log(log, fmt: str, out: str | Path | None = None, layout: str = "wide
         raise ValueError(f"format = {fmt!r}: use one of {', '.join(FORMATS)}")
     if layout not in LAYOUTS:
         raise ValueError(f"layout = {layout!r}: use one of {', '.join(LAYOUTS)}")
+    if columns not in COLUMNS:
+        raise ValueError(f"columns = {columns!r}: use one of {', '.join(COLUMNS)}")
     if fmt == "parquet":
         _require("pyarrow", fmt)
     if fmt == "mat":
         _require("scipy.io", fmt)
-    stem = Path(log_path) if log_path is not None else Path("log.mcap")
-    meta = _meta_json(log)
-    names = json.dumps({n: v for n, v in _labels(log, columns).items()})
-    if fmt in ("npz", "mat"):
-        path = Path(out) if out else stem.with_suffix(f".{fmt}")
-        path.parent.mkdir(parents=True, exist_ok=True)
-        groups = _groups(log)
-        t = np.asarray(log.t, dtype=float)
-        if fmt == "npz":
-            arrays: dict[str, Any] = {"meta_json": np.array(meta), "columns_json": np.array(names)}
-            if layout == "wide":
-                arrays["t"] = t
-                arrays.update({n: np.asarray(log.signals[n]) for n in groups["state_true"] + groups["control"]})
-            else:
-                for table, names in groups.items():
-                    arrays[f"{table}/t"] = t
-                    arrays.update({f"{table}/{n}": np.asarray(log.signals[n]) for n in names})
-            with atomic_open(path, "wb") as f:
-                np.savez_compressed(f, **arrays)
-        else:
-            sio = _require("scipy.io", fmt)
-            mdict: dict[str, Any] = {"meta_json": meta, "columns_json": names}
-            if layout == "wide":
-                mdict["t"] = t
-                mdict.update({_mat_name(n): np.asarray(log.signals[n]) for n in groups["state_true"] + groups["control"]})
-            else:
-                for table, names in groups.items():
-                    mdict[table] = {"t": t, **{_mat_name(n): np.asarray(log.signals[n]) for n in names}}
-            with atomic_path(path) as tmp:
-                sio.savemat(str(tmp), mdict, appendmat=False, do_compression=True, oned_as="column")
-        return [path]
-    tabs = tables(log, layout, columns)
-    if layout == "wide":
-        path = Path(out) if out else stem.with_suffix(f".{fmt}")
-        path.parent.mkdir(parents=True, exist_ok=True)
-        targets = {path: tabs["wide"]}
+    from uvms_mj.io.reader import LogStream, iter_samples
+
+    if isinstance(log, (str, Path)):
+        log_path = log_path if log_path is not None else log
+        stream = LogStream()
+        blocks = iter_samples(log, chunk=chunk, stream=stream)
+        info = stream
     else:
-        folder = Path(out) if out else stem.with_name(stem.stem + "-export")
-        folder.mkdir(parents=True, exist_ok=True)
-        targets = {folder / f"{name}.{fmt}": cols for name, cols in tabs.items()}
-    for path, cols in targets.items():
-        with partial_output(path):  # an interrupted or failed write leaves no half a file
-            if fmt == "csv":
-                _write_csv(cols, path)
-            else:
-                _write_parquet(cols, path, meta, names)
-    return list(targets)
+        blocks = _blocks_of(log, chunk)
+        info = log
+    stem = Path(log_path) if log_path is not None else Path("log.mcap")
+    targets = export_paths(fmt, out, layout, stem)
+    targets[0].parent.mkdir(parents=True, exist_ok=True)
+    first = True
+    names = ""
+    if fmt in ("npz", "mat"):
+        import tempfile
+
+        path = targets[0]
+        with partial_output(path), tempfile.TemporaryDirectory(prefix=f".{path.stem}.", suffix=".spool",
+                                                               dir=path.parent) as tmp:
+            spool = _Spool(Path(tmp))
+            try:
+                groups = None
+                for block in blocks:
+                    view = SimpleNamespace(t=block.t, signals=block.signals, meta=_meta_of(info))
+                    if first:
+                        groups, first = _groups(view), False
+                        names = json.dumps({n: v for n, v in _labels(view, columns).items()})
+                    for key, arr in _arrays(view, layout, groups):
+                        spool.add(key, arr)
+                if groups is None:  # no sample: the layout's empty arrays
+                    view = _empty_view(info)
+                    groups = _groups(view)
+                    names = json.dumps({n: v for n, v in _labels(view, columns).items()})
+                    for key, arr in _arrays(view, layout, groups):
+                        spool.add(key, arr)
+                extra = {"meta_json": _meta_json(_final(info)), "columns_json": names}
+                if fmt == "npz":
+                    _write_npz(spool, extra, path)
+                else:
+                    _write_mat(spool, extra, path, layout, groups)
+            finally:
+                spool.close()
+        return [path]
+    with contextlib.ExitStack() as stack:
+        writers: dict[str, Any] = {}
+        for block in blocks:
+            view = SimpleNamespace(t=block.t, signals=block.signals, meta=_meta_of(info), status=None, reason=None)
+            tabs = tables(view, layout, columns)
+            if first:
+                first = False
+                names = json.dumps({n: v for n, v in _labels(view, columns).items()})
+                writers = _open_tables(stack, fmt, layout, tabs, targets, names)
+            for table, cols in tabs.items():
+                writers[table].add(cols)
+        if first:  # no sample: the header (csv) or the schema (parquet) of the layout's empty columns
+            view = _empty_view(info)
+            tabs = tables(view, layout, columns)
+            names = json.dumps({n: v for n, v in _labels(view, columns).items()})
+            writers = _open_tables(stack, fmt, layout, tabs, targets, names)
+            for table, cols in tabs.items():
+                writers[table].add(cols)
+        if fmt == "parquet":
+            final = _meta_json(_final(info))
+            for w in writers.values():
+                w.close(final)
+    return [Path(p) for p in writers_paths(targets, layout, writers)]
+
+
+def writers_paths(targets: list[Path], layout: str, writers: dict) -> list[Path]:
+    if layout == "wide":
+        return targets[:1]
+    return [p for p in targets if p.stem in writers]
+
+
+def _open_tables(stack, fmt: str, layout: str, tabs: dict, targets: list[Path], names: str) -> dict:
+    """A writer per table, each under :func:`partial_output` and written to a temporary file."""
+    out = {}
+    for table in tabs:
+        path = targets[0] if layout == "wide" else next(p for p in targets if p.stem == table)
+        stack.enter_context(partial_output(path))
+        if fmt == "csv":
+            out[table] = _CsvTable(stack.enter_context(atomic_open(path, "w", encoding="utf-8", newline="")))
+        else:
+            tmp = stack.enter_context(atomic_path(path))
+            w = _ParquetTable(tmp, names)
+            stack.callback(lambda w=w: w._writer is not None and w._writer.close())  # an error: let it go
+            out[table] = w
+    return out
+
+
+def _meta_of(info) -> dict:
+    return dict(getattr(info, "meta", None) or {})
+
+
+def _final(info):
+    """What the meta_json of a finished export says (metadata, status, reason)."""
+    return SimpleNamespace(meta=_meta_of(info), status=getattr(info, "status", None),
+                           reason=getattr(info, "reason", None))
+
+
+def _empty_view(info):
+    """A log with no sample: each signal of the layout as an empty array of its dtype and shape."""
+    layout = getattr(info, "layout", None)
+    if layout is None:
+        sig = {k: np.asarray(v)[:0] for k, v in (getattr(info, "signals", None) or {}).items()}
+    else:
+        sig = {k: np.zeros((0,) + tuple(shape), dtype=np.dtype(dtype)) for k, (dtype, shape) in layout.items()}
+    return SimpleNamespace(t=np.zeros(0), signals=sig, meta=_meta_of(info), status=None, reason=None)
+
+
+def _arrays(view, layout: str, groups: dict[str, list[str]]):
+    """(key, array) of the npz / mat arrays of one block (the logged shapes)."""
+    t = np.asarray(view.t, dtype=float)
+    if layout == "wide":
+        yield "t", t
+        for n in groups["state_true"] + groups["control"]:
+            yield n, np.asarray(view.signals[n])
+    else:
+        for table, names in groups.items():
+            yield f"{table}/t", t
+            for n in names:
+                yield f"{table}/{n}", np.asarray(view.signals[n])

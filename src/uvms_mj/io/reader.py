@@ -124,20 +124,11 @@ def _iter_records(path: str | os.PathLike, state: dict) -> Iterator:
     state["truncated"] = not complete
 
 
-def _records(path: str | os.PathLike) -> tuple[list, bool]:
-    """All records of a log in file order (chunks broken up), and whether it was truncated.
-    Stops at the first incomplete or corrupt record."""
-    state: dict = {}
-    out = list(_iter_records(path, state))
-    return out, state["truncated"]
-
-
 def iter_messages(path: str | os.PathLike) -> Iterator[tuple[Channel, Schema | None, Message]]:
     """(channel, schema, message) of every message in file order; works on truncated logs."""
-    recs, _ = _records(path)
     schemas: dict[int, Schema] = {}
     channels: dict[int, Channel] = {}
-    for r in recs:
+    for r in _iter_records(path, {}):
         if isinstance(r, Schema):
             schemas[r.id] = r
         elif isinstance(r, Channel):
@@ -155,42 +146,6 @@ def _decode_meta(d: Mapping[str, str]) -> dict:
         except (ValueError, TypeError):
             out[k] = v
     return out
-
-
-def _scan(recs: list) -> dict:
-    """Metadata, channels and per-channel messages of a record list."""
-    schemas: dict[int, Schema] = {}
-    channels: dict[int, Channel] = {}
-    msgs: dict[int, list[Message]] = {}
-    metas: dict[str, dict] = {}
-    for r in recs:
-        if isinstance(r, Message):
-            msgs.setdefault(r.channel_id, []).append(r)
-        elif isinstance(r, Channel):
-            channels.setdefault(r.id, r)
-        elif isinstance(r, Schema):
-            schemas.setdefault(r.id, r)
-        elif isinstance(r, Metadata):
-            metas.setdefault(r.name, _decode_meta(r.metadata))
-    return {"schemas": schemas, "channels": channels, "messages": msgs, "metadata": metas}
-
-
-def _sample_channels(scan: dict) -> list[tuple[Channel, list[dict]]]:
-    out = []
-    for ch in scan["channels"].values():
-        if ch.topic in SAMPLE_TOPICS and "uvms_mj.signals" in ch.metadata:
-            out.append((ch, json.loads(ch.metadata["uvms_mj.signals"])))
-    return out
-
-
-def _complete_sequences(scan: dict, sample_chs: list) -> list[int]:
-    if not sample_chs:
-        return []
-    seqs = None
-    for ch, _ in sample_chs:
-        s = {m.sequence for m in scan["messages"].get(ch.id, [])}
-        seqs = s if seqs is None else seqs & s
-    return sorted(seqs)
 
 
 def _status(scan: dict, truncated: bool, t_end: float | None) -> tuple[str, str, dict]:
@@ -212,7 +167,8 @@ class _Columns:
     the values (numpy blocks of :data:`_BATCH` messages, converted as one list each) and whether
     the message had it. Memory: the arrays plus one batch of decoded JSON."""
 
-    def __init__(self, layout: list[dict]) -> None:
+    def __init__(self, layout: list[dict], wanted: frozenset | None = None) -> None:
+        layout = [e for e in layout if wanted is None or e["name"] in wanted]
         self.layout = layout
         self._names = [e["name"] for e in layout]
         self._seqs = array("q")
@@ -274,9 +230,38 @@ class _Columns:
         return vals[idx]
 
 
+def _names(signals) -> list[str]:
+    if isinstance(signals, str):
+        return [signals]
+    names = list(signals)
+    bad = [n for n in names if not isinstance(n, str)]
+    if bad:
+        raise TypeError(f"signals: {bad[0]!r} is not a signal name (a str)")
+    return names
 
-def read_log(path: str | os.PathLike, as_dataframe: bool = False) -> LogData:
+
+def _as_logged(arr: np.ndarray | None, dtype: str, shape: tuple) -> np.ndarray:
+    """A signal's decoded values with its logged dtype and shape (an empty array: none)."""
+    want = np.dtype(dtype)
+    if arr is None:
+        return np.zeros((0,) + shape, dtype=want)
+    if len(shape) > 1 and arr.ndim == 2 and arr.shape[1] == int(np.prod(shape)):
+        arr = arr.reshape((len(arr),) + shape)
+    if want.kind == "b":
+        arr = arr.astype(bool)
+    elif want.kind == "f" and arr.dtype.kind == "f" and arr.dtype != want:
+        arr = arr.astype(want)
+    return arr
+
+
+def read_log(path: str | os.PathLike, as_dataframe: bool = False, signals=None) -> LogData:
     """Read a log written by :class:`McapRecorder` (complete, or cut off by ``kill -9``).
+
+    ``signals``: the names of the signals to read (an iterable; None: all). Only those are
+    kept (a name the log does not have is simply absent from the result), which bounds the
+    memory of a reader that needs a few signals of a long log (the plots, the video:
+    :data:`PLOT_SIGNALS` in :mod:`uvms_mj.analysis.plots`); the sample times and the complete
+    samples are the same as with every signal read.
 
     ``as_dataframe=True``: the per-sample signals as a pandas DataFrame instead, indexed by the
     sample time ``t`` [s], one column per signal component named by joint, axis and thruster
@@ -293,6 +278,7 @@ def read_log(path: str | os.PathLike, as_dataframe: bool = False) -> LogData:
     plus ``T`` (inferred from the sample times if recorded nowhere).
     """
     head = check_log_file(path)  # a FIFO, device, foreign or empty file: LogFileError, one line
+    wanted = None if signals is None else frozenset(_names(signals))
     state: dict = {}
     channels: dict[int, Channel] = {}
     metas: dict[str, dict] = {}
@@ -310,7 +296,7 @@ def read_log(path: str | os.PathLike, as_dataframe: bool = False) -> LogData:
                 channels[r.id] = r
                 before = early.pop(r.id, [])
                 if r.topic in SAMPLE_TOPICS and "uvms_mj.signals" in r.metadata:
-                    columns[r.id] = _Columns(json.loads(r.metadata["uvms_mj.signals"]))
+                    columns[r.id] = _Columns(json.loads(r.metadata["uvms_mj.signals"]), wanted)
                     for m in before:
                         columns[r.id].add(m)
         elif isinstance(r, Metadata):
@@ -329,20 +315,9 @@ def read_log(path: str | os.PathLike, as_dataframe: bool = False) -> LogData:
                    for cid, col in sample for e in col.layout)
     picks = {cid: col.pick(keep) for cid, col in sample}  # per channel: its message of each kept sequence
     times = sample[0][1].times[picks[sample[0][0]]] if sample else np.zeros(0)
-    signals: dict[str, np.ndarray] = {}
+    out: dict[str, np.ndarray] = {}
     for _, name, dtype, shape, cid in order:
-        want = np.dtype(dtype)
-        arr = columns[cid].values(name, picks[cid])
-        if arr is None:
-            signals[name] = np.zeros((0,) + shape, dtype=want)
-            continue
-        if len(shape) > 1 and arr.ndim == 2 and arr.shape[1] == int(np.prod(shape)):
-            arr = arr.reshape((len(arr),) + shape)
-        if want.kind == "b":
-            arr = arr.astype(bool)
-        elif want.kind == "f" and arr.dtype.kind == "f" and arr.dtype != want:
-            arr = arr.astype(want)
-        signals[name] = arr
+        out[name] = _as_logged(columns[cid].values(name, picks[cid]), dtype, shape)
     t = np.asarray(times, dtype=float)
     status, reason, extra = _status(scan, truncated, float(t[-1]) if len(t) else None)
     meta = dict(scan["metadata"].get(METADATA_NAME, {}))
@@ -350,7 +325,7 @@ def read_log(path: str | os.PathLike, as_dataframe: bool = False) -> LogData:
         meta.setdefault(key, value)
     if "T" not in meta and len(t) > 1:
         meta["T"] = float(np.median(np.diff(t)))
-    log = LogData(t=t, signals=signals, status=status, reason=reason, meta=meta, truncated=truncated, path=str(path))
+    log = LogData(t=t, signals=out, status=status, reason=reason, meta=meta, truncated=truncated, path=str(path))
     if as_dataframe:
         from uvms_mj.io.export import to_dataframe
 
@@ -358,31 +333,206 @@ def read_log(path: str | os.PathLike, as_dataframe: bool = False) -> LogData:
     return log
 
 
+#: Samples per block given by :func:`iter_samples` by default.
+CHUNK_SAMPLES = 4096
+
+
+@dataclass
+class SampleBlock:
+    """Consecutive complete samples of a log (:func:`iter_samples`): ``t`` (n,) [s] and
+    ``signals`` (name -> array of n rows, the logged dtype and shape, the log's order)."""
+
+    t: np.ndarray
+    signals: dict[str, np.ndarray]
+
+
+@dataclass
+class LogStream:
+    """What :func:`iter_samples` learns of a log besides its samples: ``layout`` (signal name ->
+    (dtype, shape), the log's order; known once the first block is given, or at the end),
+    ``meta``, ``status``, ``reason``, ``truncated`` and ``samples`` (given so far); ``meta``,
+    ``status``, ``reason`` and ``truncated`` are final once the iteration is exhausted (the
+    status record is the log's last record). ``max_in_flight``: the most samples held at once
+    (pending and assembled), what bounds the reader's memory."""
+
+    path: str = ""
+    layout: dict = None  # type: ignore[assignment]
+    meta: dict = None  # type: ignore[assignment]
+    status: str = "unknown"
+    reason: str = ""
+    truncated: bool = False
+    samples: int = 0
+    max_in_flight: int = 0
+
+
+def iter_samples(path: str | os.PathLike, signals=None, chunk: int = CHUNK_SAMPLES,
+                 stream: LogStream | None = None) -> Iterator[SampleBlock]:
+    """The complete samples of a log in blocks of at most ``chunk`` samples, in file order,
+    holding at most about ``chunk`` samples (and one MCAP chunk) in memory at a time: what
+    :func:`read_log` gives, cut into pieces (the same times, signals, dtypes and shapes; the
+    blocks concatenated are :func:`read_log`'s arrays). ``signals``: as in :func:`read_log`.
+    ``stream``: a :class:`LogStream` filled with the layout, metadata and status.
+
+    A sample is complete when every sample channel has its message (its sequence number); our
+    writer registers the sample channels before the first sample and writes each sample's
+    messages together, in increasing sequence, which is what this assumes: a sample still
+    incomplete when a later one completes is dropped (read_log would drop it too), a message
+    whose sequence is not above the last completed one is ignored (the first message of a
+    sequence wins, as in read_log)."""
+    if chunk < 1:
+        raise ValueError(f"chunk = {chunk!r}: at least 1 sample")
+    file_head = check_log_file(path)  # a FIFO, device, foreign or empty file: LogFileError, one line
+    wanted = None if signals is None else frozenset(_names(signals))
+    st = stream if stream is not None else LogStream()
+    st.path, st.meta, st.samples, st.max_in_flight = str(path), {}, 0, 0
+    state: dict = {}
+    channels: dict[int, Channel] = {}
+    metas: dict[str, dict] = {}
+    layouts: dict[int, list[dict]] = {}  # sample channel id -> its (wanted) layout
+    pending: dict[int, dict[int, Message]] = {}  # sample channel id -> sequence -> message
+    ready: list[tuple[Message, ...]] = []
+    last = -1  # the last completed sequence
+    order: list[tuple] = []
+    t_end = None
+    head: list[float] = []  # the first sample times (T, when recorded nowhere)
+    for r in _iter_records(path, state):
+        if isinstance(r, Message):
+            box = pending.get(r.channel_id)
+            seq = r.sequence
+            if box is None or seq <= last or seq in box:
+                continue
+            box[seq] = r
+            if any(seq not in b for b in pending.values()):
+                continue
+            ready.append(tuple(pending[cid].pop(seq) for cid in layouts))
+            last = seq
+            for b in pending.values():  # older incomplete samples never complete (in-order writes)
+                for old in [k for k in b if k < seq]:
+                    del b[old]
+            st.max_in_flight = max(st.max_in_flight, len(ready) + sum(len(b) for b in pending.values()))
+            if len(ready) >= chunk:
+                if not order:
+                    order = _block_order(layouts, st)
+                block = _block(ready, layouts, order)
+                t_end = float(block.t[-1])
+                if len(head) < CHUNK_SAMPLES:
+                    head.extend(block.t[:CHUNK_SAMPLES].tolist())
+                yield block
+                st.samples += len(ready)
+                ready = []
+        elif isinstance(r, Channel):
+            if r.id not in channels:
+                channels[r.id] = r
+                if r.topic in SAMPLE_TOPICS and "uvms_mj.signals" in r.metadata and last < 0:
+                    layouts[r.id] = [e for e in json.loads(r.metadata["uvms_mj.signals"])
+                                     if wanted is None or e["name"] in wanted]
+                    pending[r.id] = {}
+        elif isinstance(r, Metadata):
+            metas.setdefault(r.name, _decode_meta(r.metadata))
+            if r.name == METADATA_NAME:
+                st.meta = dict(metas[METADATA_NAME])
+    if not order:
+        order = _block_order(layouts, st)
+    check_log_content(path, file_head, len(layouts), METADATA_NAME in metas)
+    if ready:
+        block = _block(ready, layouts, order)
+        t_end = float(block.t[-1])
+        if len(head) < CHUNK_SAMPLES:
+            head.extend(block.t[:CHUNK_SAMPLES].tolist())
+        yield block
+        st.samples += len(ready)
+    st.truncated = state["truncated"]
+    st.status, st.reason, extra = _status({"metadata": metas}, st.truncated, t_end)
+    meta = dict(metas.get(METADATA_NAME, {}))
+    for key, value in extra.items():
+        meta.setdefault(key, value)
+    if "T" not in meta and len(head) > 1:  # as read_log (from the first samples' spacing)
+        meta["T"] = float(np.median(np.diff(head)))
+    st.meta = meta
+
+
+def _block_order(layouts: dict[int, list[dict]], st: LogStream) -> list[tuple]:
+    """(index in the sample's messages, name, dtype, shape) of every signal, in the log's order."""
+    order = sorted((e["index"], e["name"], e["dtype"], tuple(e["shape"]), k)
+                   for k, layout in enumerate(layouts.values()) for e in layout)
+    st.layout = {name: (dtype, shape) for _, name, dtype, shape, _ in order}
+    return [(k, name, dtype, shape) for _, name, dtype, shape, k in order]
+
+
+def _block(ready: list[tuple[Message, ...]], layouts: dict[int, list[dict]], order: list[tuple]) -> SampleBlock:
+    cols = []
+    for k, layout in enumerate(layouts.values()):
+        col = _Columns(layout)
+        for msgs in ready:
+            col.add(msgs[k])
+        col.finish()
+        cols.append(col)
+    every = np.arange(len(ready))
+    t = np.asarray(cols[0].times, dtype=float) if cols else np.zeros(0)
+    signals = {name: _as_logged(cols[k].values(name, every), dtype, shape) for k, name, dtype, shape in order}
+    return SampleBlock(t=t.copy(), signals=signals)
+
+
 def log_info(path: str | os.PathLike) -> dict:
     """Summary of a log: metadata, status, truncation, channels (schema, encodings, message
-    counts), time range and number of complete samples. Works on truncated logs."""
+    counts), time range and number of complete samples. Works on truncated logs. One streaming
+    pass that decodes no message (per message it keeps its sequence and log time: 16 bytes)."""
     head = check_log_file(path)
-    recs, truncated = _records(path)
-    scan = _scan(recs)
-    sample_chs = _sample_channels(scan)
-    check_log_content(path, head, len(sample_chs), METADATA_NAME in scan["metadata"])
-    seqs = _complete_sequences(scan, sample_chs)
-    channels = []
+    state: dict = {}
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    metas: dict[str, dict] = {}
+    counts: dict[int, int] = {}
     t_min = t_max = None
-    for cid, ch in sorted(scan["channels"].items()):
-        ms = scan["messages"].get(cid, [])
-        sc = scan["schemas"].get(ch.schema_id)
-        channels.append({"topic": ch.topic, "schema": sc.name if sc else "",
-                         "schema_encoding": sc.encoding if sc else "",
-                         "message_encoding": ch.message_encoding, "messages": len(ms)})
-        if ms:
-            lo, hi = min(m.log_time for m in ms), max(m.log_time for m in ms)
-            t_min = lo if t_min is None else min(t_min, lo)
-            t_max = hi if t_max is None else max(t_max, hi)
+    seqs: dict[int, array] = {}  # sample channel id -> sequences, in file order
+    stamps: dict[int, array] = {}  # and their log times [ns]
+    early: dict[int, list[tuple[int, int]]] = {}  # sample messages met before their channel record
+    for r in _iter_records(path, state):
+        if isinstance(r, Message):
+            cid = r.channel_id
+            counts[cid] = counts.get(cid, 0) + 1
+            lt = r.log_time
+            t_min = lt if t_min is None or lt < t_min else t_min
+            t_max = lt if t_max is None or lt > t_max else t_max
+            if cid in seqs:
+                seqs[cid].append(r.sequence)
+                stamps[cid].append(lt)
+            elif cid not in channels:
+                early.setdefault(cid, []).append((r.sequence, lt))
+        elif isinstance(r, Channel):
+            if r.id not in channels:
+                channels[r.id] = r
+                before = early.pop(r.id, [])
+                if r.topic in SAMPLE_TOPICS and "uvms_mj.signals" in r.metadata:
+                    seqs[r.id] = array("q", [q for q, _ in before])
+                    stamps[r.id] = array("q", [lt for _, lt in before])
+        elif isinstance(r, Schema):
+            schemas.setdefault(r.id, r)
+        elif isinstance(r, Metadata):
+            metas.setdefault(r.name, _decode_meta(r.metadata))
+    truncated = state["truncated"]
+    check_log_content(path, head, len(seqs), METADATA_NAME in metas)
+    scan = {"metadata": metas}
+    sample_chs = [(channels[cid], json.loads(channels[cid].metadata["uvms_mj.signals"])) for cid in seqs]
+    complete = None
+    for cid in seqs:
+        u = np.unique(np.frombuffer(seqs[cid], dtype=np.int64)) if len(seqs[cid]) else np.zeros(0, np.int64)
+        complete = u if complete is None else np.intersect1d(complete, u)
+    complete = np.zeros(0, np.int64) if complete is None else complete
+    out_channels = []
+    for cid, ch in sorted(channels.items()):
+        sc = schemas.get(ch.schema_id)
+        out_channels.append({"topic": ch.topic, "schema": sc.name if sc else "",
+                             "schema_encoding": sc.encoding if sc else "",
+                             "message_encoding": ch.message_encoding, "messages": counts.get(cid, 0)})
     sample_times = []
-    if sample_chs and seqs:
-        first = {m.sequence: m.log_time for m in scan["messages"].get(sample_chs[0][0].id, [])}
-        sample_times = [first[seqs[0]] * 1e-9, first[seqs[-1]] * 1e-9]
+    if sample_chs and len(complete):
+        first = next(iter(seqs))
+        sq = np.frombuffer(seqs[first], dtype=np.int64)
+        ts = np.frombuffer(stamps[first], dtype=np.int64)
+        uniq, idx = np.unique(sq, return_index=True)  # the first message of each sequence
+        at = ts[idx[np.searchsorted(uniq, complete[[0, -1]])]]
+        sample_times = [int(at[0]) * 1e-9, int(at[1]) * 1e-9]
     status, reason, extra = _status(scan, truncated, sample_times[-1] if sample_times else None)
     start = t_min * 1e-9 if t_min is not None else None
     end = t_max * 1e-9 if t_max is not None else None
@@ -392,13 +542,13 @@ def log_info(path: str | os.PathLike) -> dict:
         "truncated": truncated,
         "status": status,
         "reason": reason,
-        "metadata": scan["metadata"].get(METADATA_NAME, {}),
-        "status_record": scan["metadata"].get(STATUS_NAME, {}),
-        "channels": channels,
+        "metadata": metas.get(METADATA_NAME, {}),
+        "status_record": metas.get(STATUS_NAME, {}),
+        "channels": out_channels,
         "start_time": start,
         "end_time": end,
         "duration": (end - start) if start is not None else 0.0,
-        "samples": len(seqs),
+        "samples": int(len(complete)),
         "signals": {e["name"]: {"dtype": e["dtype"], "shape": e["shape"], "topic": ch.topic}
                     for ch, layout in sample_chs for e in sorted(layout, key=lambda e: e["index"])},
     }

@@ -35,7 +35,16 @@ import numpy as np
 from uvms_mj.analysis.plots.paper import _plot_paper_comparison, _plot_paper_run, tracking_errors
 from uvms_mj.analysis.plots.robot import _plot_robot_comparison, _plot_robot_run, _robot, attitude_error, robot_errors
 
-__all__ = ["attitude_error", "plot_run", "plot_run_paths", "plot_comparison", "robot_errors", "tracking_errors"]
+__all__ = ["COMPARE_SIGNALS", "PLOT_SIGNALS", "attitude_error", "plot_run", "plot_run_paths", "plot_comparison",
+           "robot_errors", "tracking_errors"]
+
+#: The signals :func:`plot_comparison` reads (:func:`tracking_errors`, :func:`robot_errors`): a log
+#: read for the comparison needs only these (``read_log(path, signals=COMPARE_SIGNALS)``).
+COMPARE_SIGNALS = ("q_true", "p_desired", "tip_true", "base_desired", "tip_desired", "e_position", "e_attitude")
+#: The signals :func:`plot_run` reads (paper and robot figures): ``read_log(path, signals=PLOT_SIGNALS)``
+#: gives a log that plots the same figures with only these in memory (tests/test_memory.py checks the list).
+PLOT_SIGNALS = COMPARE_SIGNALS + ("singular_phase", "thrust_command", "thrust_force", "thrust_saturated", "torques",
+                                  "torques_applied", "f_E_hat", "det_B", "joints_desired", "wrench_body")
 
 
 def plot_run_paths(out_dir: str | Path, stem: str = "run") -> list[Path]:
@@ -72,6 +81,34 @@ def plot_run(log, out_dir: str | Path, stem: str = "run") -> list[Path]:
     return _plot_paper_run(log, out, stem)
 
 
+def _slim(log):
+    """A log given by its path: read (:data:`COMPARE_SIGNALS`), with only what
+    :func:`tracking_errors` / :func:`robot_errors` read of it (q_true's base columns; a robot's
+    e_position / e_attitude only where base_desired is missing). Other logs: as given."""
+    if not isinstance(log, (str, Path)):
+        return log
+    from types import SimpleNamespace
+
+    from uvms_mj.io.reader import read_log
+
+    full = read_log(log, signals=COMPARE_SIGNALS)
+    sig = dict(full.signals)
+    robot = _robot(full) is not None
+    q = sig.get("q_true")
+    if q is not None and q.ndim == 2:
+        sig["q_true"] = np.ascontiguousarray(q[:, :7] if robot else q[:, :3])
+    if robot:
+        sig.pop("p_desired", None)
+        bd = sig.get("base_desired")
+        if bd is not None and bd.ndim == 2 and bd.shape[1] >= 7 and len(bd) == len(full.t):
+            sig.pop("e_position", None)
+            sig.pop("e_attitude", None)
+    else:
+        for name in ("base_desired", "tip_desired", "e_position", "e_attitude"):
+            sig.pop(name, None)
+    return SimpleNamespace(t=full.t, signals=sig, meta=full.meta, status=full.status, reason=full.reason)
+
+
 def plot_comparison(logs: Mapping[str, Any], out_path: str | Path) -> Path:
     """One figure overlaying, per controller, the base position error norm [mm], the base
     attitude error [mrad] and the end-tip error norm [mm] (desired - true); RMS and max in the
@@ -79,7 +116,9 @@ def plot_comparison(logs: Mapping[str, Any], out_path: str | Path) -> Path:
     attitude error to its magnitude) so that every controller stays readable.
 
     Args:
-        logs: label (e.g. controller name) -> log of the same scenario.
+        logs: label (e.g. controller name) -> log of the same scenario, or the path of its MCAP
+            log: read one at a time, only :data:`COMPARE_SIGNALS`, and each kept as the few
+            columns the errors need (what bounds the memory of ``uvms-mj compare`` on long runs).
         out_path: the PNG to write (folders are created).
 
     Robot logs (all of them; :func:`plot_run`): the base position error norm [mm], the attitude
@@ -88,6 +127,7 @@ def plot_comparison(logs: Mapping[str, Any], out_path: str | Path) -> Path:
     """
     if not logs:
         raise ValueError("plot_comparison needs at least one log")
+    logs = {label: _slim(log) for label, log in logs.items()}  # a path: read, one at a time
     out_path = Path(out_path)
     robots = {label: _robot(log) for label, log in logs.items()}
     if any(r is not None for r in robots.values()):
