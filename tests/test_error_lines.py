@@ -148,7 +148,7 @@ def corpus(tmp_path_factory) -> dict[str, tuple[list, str]]:
         ("plant.overrides={bluerov2.mass: %s}" % big, None, "bluerov2.mass"),
         ("plant.overrides={bluerov2.mass: 1e308}", None, "|value| must be <="),
         ("plant.overrides={bluerov2.mass: 1e-300}", None, "0 or at least 1e-09"),
-        ("plant.overrides={alpha_elbow.damping: -1e-300}", None, "0 or at least 1e-09"),
+        ("plant.overrides={bluerov2.volume: -1e-300}", None, "0 or at least 1e-09"),
         ("plant.payload={mass: 1e308}", None, "plant.payload.mass"),
         ("plant.payload={mass: 1e-300}", None, "plant.payload.mass"),
         ("plant.payload={mass: %s}" % big, None, "plant.payload.mass"),

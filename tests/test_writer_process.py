@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 
 from oracles.planar.nominal import params_from_file
+from uvms_mj.io import writer_process
 from uvms_mj.io.mcap_writer import LeanWriter
 from uvms_mj.io.reader import iter_messages, read_log
 from uvms_mj.io.recorder import McapRecorder
@@ -109,6 +110,9 @@ def test_auto_is_the_process_here_and_inline_where_it_cannot_pay(monkeypatch):
     assert not process_wanted("auto", 0.0, None)  # each sample written by its write_sample
     assert not process_wanted("auto", 1.0, object())  # a live sink
     assert process_wanted("process", 0.0, None) and not process_wanted("inline", 1.0, None)
+    monkeypatch.setattr(writer_process, "_POOL_WORKER", True)  # a Ray task's process (mark_pool_worker)
+    assert not process_wanted("auto", 1.0, None) and process_wanted("process", 1.0, None)
+    monkeypatch.setattr(writer_process, "_POOL_WORKER", False)
     monkeypatch.setenv("UVMS_MJ_LOG_WRITER", "inline")
     assert not process_wanted("auto", 1.0, None)
     with pytest.raises(ValueError, match="writer = 'threads'.*allowed"):

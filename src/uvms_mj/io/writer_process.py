@@ -50,6 +50,17 @@ _DTYPE = operator.attrgetter("dtype")
 _NDARRAY = {np.ndarray}
 
 
+#: Set by :func:`mark_pool_worker` in a pool's worker that multiprocessing does not mark (a Ray task's
+#: process); "auto" then writes inline.
+_POOL_WORKER = False
+
+
+def mark_pool_worker() -> None:
+    """Mark this process as a pool's worker (Ray): "auto" writes inline here (the pool has the cores)."""
+    global _POOL_WORKER
+    _POOL_WORKER = True
+
+
 def process_wanted(mode: str, flush_interval: float, live: Any) -> bool:
     """Whether a recorder writes through a writer process. ``mode`` "auto": where that pays, on
     Linux with 2 or more usable cores, a flush interval > 0 (0: each sample is written by its
@@ -73,7 +84,7 @@ def process_wanted(mode: str, flush_interval: float, live: Any) -> bool:
             raise ValueError("writer = 'process' cannot feed a live sink (it is written inline)")
         return True
     mp = sys.modules.get("multiprocessing")
-    worker = (mp is not None and mp.parent_process() is not None) or "ray" in sys.modules
+    worker = (mp is not None and mp.parent_process() is not None) or _POOL_WORKER
     try:
         cores = len(os.sched_getaffinity(0))
     except (AttributeError, OSError):

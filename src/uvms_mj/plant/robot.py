@@ -92,10 +92,11 @@ OVERRIDE_MAX = 1e9
 #: The smallest non-zero magnitude an override value may have (ours, as the scenario's SIZE_MIN: 1e-300 kg passed
 #: and ran as if massless; MuJoCo's own floor for masses and inertias is mjMINVAL = 1e-15).
 OVERRIDE_MIN = 1e-9
-#: The fields OVERRIDE_MIN applies to: scales (a position, a centre of buoyancy or a range may be as small
-#: as it likes: an identified cob of 1e-12 m is a fit that crossed zero).
-SCALE_FIELDS = frozenset({"mass", "inertia", "volume", "density", "damping", "armature", "frictionloss", "added_mass",
-                          "linear_damping", "quadratic_damping", "drag_coef", "tau"})
+#: The fields OVERRIDE_MIN applies to: scales whose tiny non-zero value makes no body (a mass, an inertia,
+#: a volume, a density) or divides (a time constant tau). A position, a centre of buoyancy, a range or a
+#: damping coefficient may be as small as it likes: an identified cob of 1e-12 m or a roll damping of
+#: 1e-10 N m s/rad is a fit that reached zero (sim2real identification, bound 0).
+SCALE_FIELDS = frozenset({"mass", "inertia", "volume", "density", "tau"})
 
 
 def _numbers(key: str, value: Any, n: int | None, what: str) -> np.ndarray:

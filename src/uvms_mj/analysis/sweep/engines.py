@@ -306,6 +306,14 @@ def _drop_unopened_logs(tasks) -> None:
             Path(log).unlink(missing_ok=True)
 
 
+def _execute_ray(task: dict) -> dict:
+    """:func:`execute_run` in a Ray task's process, marked as a pool worker (logs written inline)."""
+    from uvms_mj.io.writer_process import mark_pool_worker
+
+    mark_pool_worker()
+    return execute_run(task)
+
+
 def _engine_ray(tasks: list[dict], workers: int, done: Callable[[dict, dict], None]) -> None:
     try:
         import ray
@@ -322,7 +330,7 @@ def _engine_ray(tasks: list[dict], workers: int, done: Callable[[dict, dict], No
     _reclaim_signals(handlers)
     interrupted = False
     try:
-        remote = ray.remote(num_cpus=1, max_retries=MAX_ATTEMPTS - 1)(execute_run)
+        remote = ray.remote(num_cpus=1, max_retries=MAX_ATTEMPTS - 1)(_execute_ray)
         pending = {remote.remote(t): t for t in tasks}
         try:
             while pending:
@@ -351,6 +359,10 @@ def _engine_ray(tasks: list[dict], workers: int, done: Callable[[dict, dict], No
                     pass
             if pending:  # the cancels are asynchronous: let the killed workers go before the clean-up
                 ray.wait(list(pending), num_returns=len(pending), timeout=WORKER_GRACE_S)
+            for t in pending.values():  # its log closed with a final status, its result not back: the row from the log
+                res = _result_from_log(t)
+                if res is not None:
+                    done(t, res)
             _drop_unopened_logs(pending.values())
             raise
     finally:
