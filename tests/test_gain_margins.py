@@ -27,6 +27,32 @@ T_PAPER = 1.0 / 60.0
 # ---------------------------------------------------------------- the model against closed forms
 
 
+@pytest.mark.parametrize("T,tau", [(T_PAPER, 0.0), (T_PAPER, 0.05), (T_PAPER, 1e-4), (T_PAPER, 30.0),
+                                   (0.05, 0.05), (0.01, 0.0105)])
+def test_sampled_plant_is_the_matrix_exponential(T, tau):
+    """The closed-form zero-order-hold plant (double integrator behind a first-order thruster lag)
+    against scipy's matrix exponential of [[A, B], [0, 0]] T, the textbook discretisation (Franklin,
+    Powell & Workman, Digital Control, section 4.3.3). Cases cover a = T/tau on both sides of the
+    series/expm1 switch at 1 (0.0006 to 167) and no lag. Tolerance 1e-12 relative to each entry's
+    scale: the closed form is exact; expm's Pade approximation is good to about 1e-15."""
+    from scipy.linalg import expm
+
+    from uvms_mj.control.margins import _plant
+
+    if tau > 0:
+        Ac = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0 / tau]])
+        Bc = np.array([0.0, 0.0, 1.0 / tau])
+    else:
+        Ac, Bc = np.array([[0.0, 1.0], [0.0, 0.0]]), np.array([0.0, 1.0])
+    n = len(Bc)
+    E = np.zeros((n + 1, n + 1))
+    E[:n, :n], E[:n, n] = Ac, Bc
+    F = expm(E * T)
+    Phi, Gam = _plant(T, tau, "zoh")
+    np.testing.assert_allclose(Phi, F[:n, :n], rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(Gam, F[:n, n], rtol=1e-12, atol=1e-15)
+
+
 @pytest.mark.parametrize("gamma,lam", [(0.3, 0.2), (0.1, 0.7), (0.5, 0.5)])
 def test_ideal_plant_eigenvalues_are_one_minus_gains(gamma, lam):
     """The paper's reading (docs/paper-reading.md, Eqs. 10-11): with the velocity realising a_d

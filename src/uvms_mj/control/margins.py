@@ -64,19 +64,39 @@ def _plant(T: float, tau: float, plant: str) -> tuple[np.ndarray, np.ndarray]:
         return np.array([[1.0, T], [0.0, 1.0]]), np.array([T * T, T])
     if plant != "zoh":
         raise ValueError(f"plant = {plant!r}; allowed: zoh, ideal")
-    if tau > 0:
-        Ac = np.array([[0.0, 1.0, 0.0], [0.0, 0.0, 1.0], [0.0, 0.0, -1.0 / tau]])
-        Bc = np.array([0.0, 0.0, 1.0 / tau])
-    else:
-        Ac = np.array([[0.0, 1.0], [0.0, 0.0]])
-        Bc = np.array([0.0, 1.0])
-    n = Ac.shape[0]
-    E = np.zeros((n + 1, n + 1))
-    E[:n, :n], E[:n, n] = Ac, Bc
-    from scipy.linalg import expm  # here: scipy costs ~0.5 s to import (a quick CLI, issue 22 item 7)
+    if tau <= 0:  # x(k+1) = x + T v + T^2/2 u, v(k+1) = v + T u
+        return np.array([[1.0, T], [0.0, 1.0]]), np.array([T * T / 2, T])
+    # Double integrator behind a first-order lag: x' = v, v' = f, f' = (u - f)/tau, u held over T.
+    # Integrating f(s) = e^(-s/tau) f0 + (1 - e^(-s/tau)) u twice over [0, T] (a = T/tau):
+    #   f(T) = e^-a f0 + (1 - e^-a) u
+    #   v(T) = v0 + tau (1 - e^-a) f0 + tau (a - 1 + e^-a) u
+    #   x(T) = x0 + T v0 + tau^2 (a - 1 + e^-a) f0 + tau^2 (a^2/2 - a + 1 - e^-a) u
+    # (the exact zero-order-hold discretisation, exp([[A, B], [0, 0]] T), in closed form: scipy's expm
+    # would cost ~0.15 s of import in every ``validate``, issue 22 item 7; tests check it against expm).
+    a = T / tau
+    c1, c2, c3 = _lag_phi(a)
+    Phi = np.array([[1.0, T, tau * tau * c2], [0.0, 1.0, tau * c1], [0.0, 0.0, 1.0 - c1]])
+    return Phi, np.array([tau * tau * c3, tau * c2, c1])
 
-    F = expm(E * T)
-    return F[:n, :n], F[:n, n]
+
+def _lag_phi(a: float) -> tuple[float, float, float]:
+    """(1 - e^-a, a - 1 + e^-a, a^2/2 - a + 1 - e^-a) for a >= 0, each without cancellation.
+
+    They are -(tails of e^-a = sum_k (-a)^k / k!) from k = 1, 2, 3 on, with signs -, +, -: summed as
+    series for a < 1 (the terms fall by a/k; 30 terms leave less than 1e-32 relative), from expm1 for
+    a >= 1 (where the subtractions lose at most a few ulps).
+    """
+    if a >= 1.0:
+        c1 = -math.expm1(-a)
+        return c1, a - c1, a * a / 2 - a + c1
+    # e^-a = sum (-a)^k / k!; c1 = -sum_{k>=1}, c2 = sum_{k>=2}, c3 = -sum_{k>=3}
+    terms = [1.0]
+    for k in range(1, 30):
+        terms.append(terms[-1] * (-a) / k)
+    c1 = -math.fsum(terms[1:])
+    c2 = math.fsum(terms[2:])
+    c3 = -math.fsum(terms[3:])
+    return c1, c2, c3
 
 
 def closed_loop_matrix(gamma: float, lam: float, T: float, delay: int = 0, tau: float = 0.0,
