@@ -235,3 +235,40 @@ def test_parent_killed_leaves_a_truncated_log_and_no_child(tmp_path):
     assert _gone(child)
     log = read_log(path)
     assert log.truncated and len(log.t) == 400
+
+
+@linux_only
+def test_hand_offs_do_not_wait_for_the_child_to_encode(tmp_path):
+    """The pipe to the child holds several batches (writer_process.PIPE_BYTES): with the child
+    stopped (SIGSTOP, as if busy encoding) the simulation still hands off three batches (~250 KB,
+    four times Linux's default 64 KiB pipe, which made each hand-off wait for the child's previous
+    encoding). The hand-offs run in a thread; the 60 s join only guards against a hang."""
+    import pickle
+    import threading
+
+    try:
+        limit = int(Path("/proc/sys/fs/pipe-max-size").read_text())
+    except (OSError, ValueError):
+        limit = 0
+    rows = [row_of(k) for k in range(3 * BATCH + 1)]
+    batch = len(pickle.dumps(writer_process._pack([(0.0, r, True) for r in rows[1:BATCH + 1]],
+                                                  *_specs(rows[0]))))
+    if limit < 4 * batch:
+        pytest.skip(f"pipe-max-size {limit} B holds fewer than 4 batches of {batch} B")
+    path = tmp_path / "p.mcap"
+    rec = McapRecorder(path, params_from_file(), {}, writer="process", flush_interval=1e9)
+    rec.write_sample(0.0, rows[0])
+    pid = rec._proc.pid
+    os.kill(pid, signal.SIGSTOP)
+    try:
+        worker = threading.Thread(target=lambda: [rec.write_sample(k / 60, rows[k]) for k in range(1, len(rows))])
+        worker.start()
+        worker.join(60)
+        handed_off = not worker.is_alive()
+    finally:
+        os.kill(pid, signal.SIGCONT)
+    worker.join()
+    rec.close()
+    assert 3 * batch > 65536, "the case must exceed the default pipe"
+    assert handed_off, "a hand-off waited for the stopped child"
+    assert len(read_log(path).t) == len(rows)

@@ -151,6 +151,28 @@ def _unpack(packed: tuple, order: tuple[str, ...]) -> list:
 # --------------------------------------------------------------------------- the parent's side
 
 
+#: The pipe to the child holds this many bytes (Linux ``F_SETPIPE_SZ``, at most the system's
+#: ``/proc/sys/fs/pipe-max-size``, 1 MiB by default): several batches (a 256-sample batch of the 3-D
+#: circle study is 287 KB). With the default 64 KiB a hand-off blocked until the child had encoded
+#: the previous batch and started reading, so the simulation waited for the encoding it hands off.
+PIPE_BYTES = 1 << 20
+
+
+def _widen(fd: int) -> None:
+    """Make the pipe ``fd`` hold :data:`PIPE_BYTES` (or the most allowed; unchanged where it cannot)."""
+    try:
+        import fcntl
+
+        setsz = getattr(fcntl, "F_SETPIPE_SZ", 1031)  # (the constant is in fcntl from Python 3.10, Linux)
+        try:
+            limit = int(open("/proc/sys/fs/pipe-max-size").read())
+        except (OSError, ValueError):
+            limit = PIPE_BYTES
+        fcntl.fcntl(fd, setsz, min(PIPE_BYTES, limit))
+    except (ImportError, OSError, ValueError):
+        pass  # the default size: slower hand-offs, the same log
+
+
 def _surfaced(exc: BaseException, tb: str) -> BaseException:
     """The child's exception as raised here (picklable as it is, else a RuntimeError naming it)."""
     try:
@@ -177,6 +199,7 @@ class _WriterProcess:
         self.dead = ""  # why the child ended unexpectedly (then nothing more is written)
         down_r, down_w = os.pipe()
         up_r, up_w = os.pipe()
+        _widen(down_w)
         rec._file.flush()  # nothing of the file left in this process's buffer: the child writes it
         old = signal.pthread_sigmask(signal.SIG_BLOCK, _BLOCKED)
         try:
