@@ -20,6 +20,7 @@ disk; the message names the file); 130 interrupted (Ctrl-C or SIGTERM; the log i
 
 from __future__ import annotations
 
+import contextlib
 import os
 import signal
 import sys
@@ -104,7 +105,15 @@ class _Group(click.Group):
             import uvms_mj.physics.build  # noqa: F401
         from uvms_mj.io.interrupts import cli_signals, exit_now, signalled
 
-        with cli_signals(watchdog=_CLI_PROCESS):
+        try:
+            policy = cli_signals(watchdog=_CLI_PROCESS)
+            policy.__enter__()
+        except KeyboardInterrupt:  # the signal came while the policy was being set up
+            if _CLI_PROCESS:
+                exit_now(message=True)
+            _interrupted()
+        with contextlib.ExitStack() as stack:
+            stack.push(policy)
             try:
                 rv = super().main(*args, **kwargs)
             except SystemExit as exc:

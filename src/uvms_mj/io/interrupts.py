@@ -291,11 +291,17 @@ def cli_signals(watchdog: bool = True) -> Iterator[None]:
         yield
         return
     _signalled = False
+    fd = None
+    if watchdog:  # the thread started first, under the start-up policy (a signal while it starts: exit 130 there)
+        try:
+            fd = _arm_watchdog()
+        except (ValueError, OSError):
+            fd = None
     old = {sig: signal.signal(sig, _on_signal) for sig in (signal.SIGINT, signal.SIGTERM)}
     old_fd = None
-    if watchdog:
+    if fd is not None:
         try:
-            old_fd = signal.set_wakeup_fd(_arm_watchdog(), warn_on_full_buffer=False)
+            old_fd = signal.set_wakeup_fd(fd, warn_on_full_buffer=False)
             _watchdog_armed = True
         except (ValueError, OSError):
             old_fd = None
