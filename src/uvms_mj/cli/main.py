@@ -105,15 +105,13 @@ class _Group(click.Group):
             import uvms_mj.physics.build  # noqa: F401
         from uvms_mj.io.interrupts import cli_signals, exit_now, signalled
 
-        try:
-            policy = cli_signals(watchdog=_CLI_PROCESS)
-            policy.__enter__()
-        except KeyboardInterrupt:  # the signal came while the policy was being set up
-            if _CLI_PROCESS:
-                exit_now(message=True)
-            _interrupted()
         with contextlib.ExitStack() as stack:
-            stack.push(policy)
+            try:
+                stack.enter_context(cli_signals(watchdog=_CLI_PROCESS))
+            except KeyboardInterrupt:  # the signal came while the policy was being set up
+                if _CLI_PROCESS:
+                    exit_now(message=True)
+                _interrupted()
             try:
                 rv = super().main(*args, **kwargs)
             except SystemExit as exc:

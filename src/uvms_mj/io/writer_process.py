@@ -165,7 +165,8 @@ def _widen(fd: int) -> None:
 
         setsz = getattr(fcntl, "F_SETPIPE_SZ", 1031)  # (the constant is in fcntl from Python 3.10, Linux)
         try:
-            limit = int(open("/proc/sys/fs/pipe-max-size").read())
+            with open("/proc/sys/fs/pipe-max-size") as f:
+                limit = int(f.read())
         except (OSError, ValueError):
             limit = PIPE_BYTES
         fcntl.fcntl(fd, setsz, min(PIPE_BYTES, limit))
