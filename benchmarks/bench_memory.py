@@ -21,6 +21,9 @@ workers; the peak is the largest single process: ru_maxrss of the children is a 
 Measured on 2026-12-03 (issue 23; 3600 s logs: paper 119 MB, bluerov2_alpha_station 230 MB), peak
 RSS [MB] before -> after: paper info 5748 -> 89, plot 401 -> 241, csv 492 -> 115, npz 374 -> 104,
 parquet 597 -> 200, render 478 -> 272, compare -> 385; station: see the report of branch mem-read.
+Measured on 2026-12-04 after the runs were streamed (``keep=False``: metrics accumulated, no
+sample kept): ``run --no-plots`` paper 98 MB at 60 s and 99 MB at 3600 s, station 96 and 97 MB;
+``sweep`` station 207 MB at both durations (README "Memory").
 """
 
 from __future__ import annotations

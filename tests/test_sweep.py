@@ -283,10 +283,10 @@ def test_failures_are_recorded_and_never_stop_the_sweep(tmp_path):
 def test_a_run_that_raises_is_recorded(tmp_path, monkeypatch):
     real = sw.engines._run_scenario
 
-    def flaky(scenario, sink=None):
+    def flaky(scenario, sink=None, **kw):
         if scenario.thrusters.tau > 0.025:
             raise RuntimeError("boom in the plant")
-        return real(scenario, sink=sink)
+        return real(scenario, sink=sink, **kw)
 
     monkeypatch.setattr(sw.engines, "_run_scenario", flaky)
     plan = plan_sweep(PAPER, ["thrusters.tau=[0.02, 0.03, 0.021]"], controllers="rac", sets=["duration=0.5"])

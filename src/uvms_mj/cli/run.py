@@ -44,8 +44,10 @@ def _run_one(scenario, out: Path, progress: bool = True, source: str | None = No
                 McapRecorder(out, plant.params, meta, **rec_kw) as rec:
             opened = True
             try:
+                # streamed (keep=False): the rows go to the log, the metrics accumulate as the run goes,
+                # and nothing grows with the duration (plots and videos read the log)
                 res = run_scenario(scenario, sink=rec.write_sample, on_sample=tick if progress else None,
-                                   built=(plant, ctrl), nav_sink=rec.write_navigation)
+                                   built=(plant, ctrl), nav_sink=rec.write_navigation, keep=False)
             except KeyboardInterrupt as exc:
                 rec.close(status="interrupted", reason=str(exc) or "interrupted (Ctrl-C)")
                 click.echo(f"interrupted; partial log closed cleanly: {out}", err=True)
@@ -83,16 +85,15 @@ def _live_server(port: int, pace: str, wait: float):
     return server
 
 
-def _plots(log_path: Path, echo=click.echo, data=None, protect: tuple = ()) -> None:
-    """The plots of a run's log (``data``: the run itself, which holds the log's signals, else the
-    log is read); a run too short (or too broken) to plot gets a warning."""
+def _plots(log_path: Path, echo=click.echo, protect: tuple = ()) -> None:
+    """The plots of a run's log (its signals read from it); a run too short (or too broken) to
+    plot gets a warning."""
     from uvms_mj.analysis.plots import PLOT_SIGNALS, plot_run, plot_run_paths
 
     for p in plot_run_paths(log_path.parent, log_path.stem):
         _check_out(p, protect=protect, kind="plot", option="--plots")
     try:
-        paths = plot_run(data if data is not None else _read(log_path, PLOT_SIGNALS), log_path.parent,
-                         stem=log_path.stem)
+        paths = plot_run(_read(log_path, PLOT_SIGNALS), log_path.parent, stem=log_path.stem)
     except OSError as exc:
         _io_error(log_path.parent, exc)
     except (ValueError, KeyError, IndexError, TypeError) as exc:
@@ -203,9 +204,7 @@ def run_cmd(scenario: str, sets: tuple[str, ...], out: str | None, video: bool |
         _write_json(_json_metrics({sc.controller.name: {"status": status, "reason": reason, "log": str(log),
                                                         "metrics": m}}, sc.name), json_out)
     if plots if plots is not None else sc.outputs.plots:
-        # the run's arrays are the log's, bit for bit: not read back (memory, time)
-        _plots(log, echo, data=res, protect=(scenario, json_out))
-    del res  # the video reads the log
+        _plots(log, echo, protect=(scenario, json_out))  # from the log (the run kept no samples)
     if video if video is not None else sc.outputs.video:
         _video(log, log.with_suffix(".mp4"), sc, echo=echo, protect=(scenario, json_out))
     if status != "ok":
@@ -263,7 +262,7 @@ def compare(scenario: str, controllers: str, sets: tuple[str, ...], out_dir: str
         runs[name] = {"status": res.status, "reason": res.reason, "log": str(path), "metrics": m}
         if res.status != "ok":
             failed.append(f"{name}: {res.reason}")
-        del res  # its arrays (the figure reads the logs)
+        del res
         _release_memory()
         echo(f"log: {path}")
         if video:

@@ -48,11 +48,15 @@ class OnlineEstimator:
         gravity: (3,) world [m/s^2] (the plant model's ``opt.gravity``).
         water_density: [kg/m^3] (the depth sensor's conversion).
         position, velocity, quat: the initial state (world; quat w x y z, world <- body).
+        trim: drop every sample from ``record`` once fed (a run that keeps no samples: memory that
+            does not grow with its duration); False: the record keeps them.
     """
 
-    def __init__(self, config, record, gravity, water_density: float, position, velocity, quat) -> None:
+    def __init__(self, config, record, gravity, water_density: float, position, velocity, quat,
+                 trim: bool = False) -> None:
         params = params_from_navigation(config, record, gravity, water_density=water_density, fix_gate=FIX_GATE)
         self.record = record
+        self.trim = bool(trim)
         self.filter = ESKF(NavState(np.asarray(position, float), np.asarray(velocity, float),
                                     np.asarray(quat, float)), np.diag(P0_SIGMA ** 2), params)
         self._next = {k: 0 for k in _ORDER}  # the next unread sample per kind
@@ -75,6 +79,13 @@ class OnlineEstimator:
         pending.sort()
         for _, _, i, kind in pending:
             getattr(self.filter, "on_" + kind)(getattr(self.record, kind)[i])
+        if self.trim:  # the fed samples dropped: the indices start again at 0
+            for kind, i in self._next.items():
+                if i:
+                    del getattr(self.record, kind)[:i]
+                    if kind == "imu":
+                        del self.record.imu_arrival[:i]
+                    self._next[kind] = 0
 
     def state(self, t: Optional[float] = None) -> NavEstimate:
         """The estimate at ``t`` [s] (extrapolated from the last IMU sample fed; the filter unchanged)."""

@@ -530,11 +530,14 @@ def run_scenario(
     on_sample: Callable[[int, int], None] | None = None,
     built: tuple | None = None,
     nav_sink: Callable[[str, Any, dict], None] | None = None,
+    keep: bool = True,
 ) -> RunResult:
     """Build and run a scenario (:func:`uvms_mj.sim.loop.run_closed_loop`). ``result.meta`` gains
     ``scenario`` (:func:`resolved`), ``name`` and ``backend``. ``built``: the (plant,
     controller) of :func:`build` if the caller built them already (fresh, never run).
-    ``nav_sink``: receives the navigation samples (:func:`uvms_mj.sim.loop.run_closed_loop`)."""
+    ``nav_sink``: receives the navigation samples; ``keep``: False streams the run (its rows to
+    ``sink`` only, its metrics accumulated: memory that does not grow with the duration; see
+    :func:`uvms_mj.sim.loop.run_closed_loop`)."""
     from uvms_mj.sim.loop import run_closed_loop
 
     plant, ctrl = built if built is not None else build(scenario)
@@ -543,7 +546,7 @@ def run_scenario(
     res = run_closed_loop(plant, ctrl, scenario.duration, T=T, sensor=sensor, seed=scenario.seed,
                           warm_start=scenario.warm_start, on_sample=on_sample, sink=sink,
                           navigation=nav_config(scenario), nav_sink=nav_sink,
-                          feedback=scenario.controller.feedback)
+                          feedback=scenario.controller.feedback, keep=keep)
     res.meta.update(name=scenario.name, backend=plant.backend, scenario=resolved(scenario))
     if plant.layout.base_free:  # a floating robot's logs describe it from its model
         from uvms_mj.scenario.robot import robot_info

@@ -15,7 +15,7 @@ from typing import Mapping
 import mujoco
 import numpy as np
 
-__all__ = ["JOINT_LIMIT_TOLERANCE_DEG", "joint_limit_excursion", "joint_limit_status", "plant_joint_ranges"]
+__all__ = ["JOINT_LIMIT_TOLERANCE_DEG", "joint_limit_excursion", "joint_limit_reason", "joint_limit_status", "plant_joint_ranges"]
 
 #: A joint further than this past its range [deg] makes the run's status ``joint_limit``
 #: (ours: the issue's 1 deg; MuJoCo's soft limit constraint lets a joint pushed into its limit
@@ -63,7 +63,12 @@ def joint_limit_status(q: np.ndarray, ranges: Mapping[str, list[float]] | None, 
                        tolerance_deg: float = JOINT_LIMIT_TOLERANCE_DEG) -> str:
     """The reason of a ``joint_limit`` status ("" when no joint leaves its range by more than
     ``tolerance_deg``), naming the joint, the excursion, the limit and the time."""
-    e = joint_limit_excursion(q, ranges, t)
+    return joint_limit_reason(joint_limit_excursion(q, ranges, t), tolerance_deg)
+
+
+def joint_limit_reason(e: Mapping, tolerance_deg: float = JOINT_LIMIT_TOLERANCE_DEG) -> str:
+    """The reason of a ``joint_limit`` status from an excursion (:func:`joint_limit_excursion`'s
+    dict): "" unless it exceeds ``tolerance_deg``."""
     if not (e["deg"] > tolerance_deg):
         return ""
     return (f"joint {e['joint']} went {e['deg']:.2f} deg past its {e['side']} limit ({e['limit_deg']:.1f} deg) "

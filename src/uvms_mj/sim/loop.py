@@ -4,7 +4,8 @@ Measurements are sampled at kT: base pose and joint angles, with optional Gaussi
 quantization and a one-sample delay (:class:`SensorModel`); velocities come from a velocity
 sensor if configured, else the controller differentiates positions. Every controller signal and
 the true plant state are recorded per sample (:class:`uvms_mj.sim.samples.SampleRecord`: arrays
-of the run's final size). A diverging plant stops the run cleanly with the time and the reason
+of the run's final size), or, with ``keep=False``, streamed to the sink and the metrics'
+accumulator a chunk at a time (memory that does not grow with the duration). A diverging plant stops the run cleanly with the time and the reason
 (the record up to then is kept).
 """
 
@@ -19,7 +20,8 @@ import numpy as np
 from uvms_mj.control.base import Command, Controller, Measurement
 from uvms_mj.plant.plant import DivergenceError, Plant, mujoco_warnings
 from uvms_mj.rotations import quat_from_rotvec, quat_mul, quat_to_mat, rotation_log
-from uvms_mj.sim.limits import joint_limit_status, plant_joint_ranges
+from uvms_mj.sim.limits import joint_limit_reason, joint_limit_status, plant_joint_ranges
+from uvms_mj.sim.metrics import RunMetrics
 from uvms_mj.sim.samples import SampleRecord
 from uvms_mj.sim.sensors import Signal, SignalSensors
 
@@ -90,11 +92,15 @@ class RunResult:
         status: "ok", "diverged" or "joint_limit" (finished, but a joint left the plant's
             range by more than :data:`uvms_mj.sim.limits.JOINT_LIMIT_TOLERANCE_DEG`).
         reason: why it stopped early, or which joint left its range ("" if ok).
-        meta: ``T``, ``dt``, ``seed``, ``controller``, ``joint_ranges`` (the plant's limited
+        meta: ``T``, ``dt``, ``seed``, ``controller``, ``samples`` (recorded), ``t_end`` (the
+            last sample's time [s], NaN without one), ``joint_ranges`` (the plant's limited
             hinges, :func:`uvms_mj.sim.limits.plant_joint_ranges`) and, for a controller with a
             ``resolved_params`` dict (RAC: its thresholds as numbers), ``controller_params``.
         navigation: the navigation sensors' samples
             (:class:`uvms_mj.sim.navsensors.NavigationRecord`) of a run with ``navigation``; else None.
+        metrics: the run's metrics accumulated as it ran (``run_closed_loop(keep=False)``:
+            :class:`uvms_mj.sim.metrics.RunMetrics`), else None (:func:`uvms_mj.sim.metrics.metrics`
+            computes them from ``signals``).
     """
 
     t: np.ndarray
@@ -103,6 +109,7 @@ class RunResult:
     reason: str = ""
     meta: dict = field(default_factory=dict)
     navigation: Any = None
+    metrics: dict | None = None
 
 
 def _quantize(x: np.ndarray, quantum: float) -> np.ndarray:
@@ -179,7 +186,7 @@ def _start_estimator(navigation, nav, plant, layout, q_true: np.ndarray, qd_true
 
     a, d = layout.base_qadr, layout.base_dadr
     return OnlineEstimator(navigation, nav.record, plant.model.opt.gravity, nav.rho, q_true[a:a + 3].copy(),
-                           qd_true[d:d + 3].copy(), q_true[a + 3:a + 7].copy())
+                           qd_true[d:d + 3].copy(), q_true[a + 3:a + 7].copy(), trim=nav.keep != "all")
 
 
 def _estimated(est, meas: Measurement, layout, q_true: np.ndarray, t: float) -> tuple[Measurement, dict]:
@@ -217,6 +224,7 @@ def run_closed_loop(
     navigation: Any = None,
     nav_sink: Callable[[str, Any, dict], None] | None = None,
     feedback: str = "truth",
+    keep: bool = True,
 ) -> RunResult:
     """Run ``controller`` on ``plant`` for ``duration`` seconds.
 
@@ -240,6 +248,13 @@ def run_closed_loop(
             ``nav_sigma_pos`` [m], ``nav_sigma_att`` [rad] (body), ``nav_error_pos`` (true - estimate,
             world [m]) and ``nav_error_att``
             (the rotation vector of R_est^T R_true, body [rad]).
+        keep: keep every sample's signals in the result (``RunResult.t``, ``signals``, and the
+            navigation samples). False: nothing grows with the run's duration: the rows go to
+            ``sink`` only, the metrics are accumulated as the run goes
+            (:class:`uvms_mj.sim.metrics.RunMetrics`, into ``RunResult.metrics``; the same numbers
+            as :func:`uvms_mj.sim.metrics.metrics` of the kept run), ``t`` and ``signals`` are
+            empty (``meta["samples"]`` and ``meta["t_end"]`` say how far the run got) and
+            ``navigation`` holds the sensors' mounts only.
     """
     if feedback not in ("truth", "estimate"):
         raise ValueError(f"feedback = {feedback!r}; allowed: truth, estimate")
@@ -250,8 +265,24 @@ def run_closed_loop(
     sub = int(round(sub))
     n = int(math.floor(duration / T + 1e-9)) + 1
     rng = np.random.default_rng(seed)
-    rows = SampleRecord(n)  # every signal in one array of the run's size (memory: the values only)
-    times = np.empty(n)
+    ranges = plant_joint_ranges(plant.model)
+    layout = getattr(plant, "layout", None)  # a free vehicle: measured by its layout (measure_robot)
+    if layout is not None and not layout.base_free:
+        layout = None  # a planar base (the paper's): the planar measurement below
+    acc = None
+    if keep:
+        rows = SampleRecord(n)  # every signal in one array of the run's size (memory: the values only)
+        times = np.empty(n)
+    else:  # streamed: the metrics as the rows come, a chunk at a time (memory: one chunk)
+        acc = RunMetrics({"T": T, "joint_ranges": ranges,
+                          **({"robot": {"layout": layout.describe()}} if layout is not None else {})})
+
+        def block(start: int, m: int, signals: dict) -> None:
+            acc.add((start + np.arange(m)) * T, signals)
+
+        rows = SampleRecord(n, on_block=block)
+        times = None
+    t_last = math.nan
     status, reason = "ok", ""
     q_prev_meas = None
     mujoco_warnings(clear=True)  # only this run's
@@ -262,10 +293,6 @@ def run_closed_loop(
     noisy = bool(sensor.position_noise or att_noise or joint_noise)
     quantized = bool(sensor.position_quantum or sensor.angle_quantum)
 
-    layout = getattr(plant, "layout", None)  # a free vehicle: measured by its layout (measure_robot)
-    if layout is not None and not layout.base_free:
-        layout = None  # a planar base (the paper's): the planar measurement below
-
     per_signal = SignalSensors(sensor.signals, T, seed, plant.layout) if sensor.signals else None
     nav = None
     if navigation is not None:
@@ -273,7 +300,8 @@ def run_closed_loop(
 
         hydro = getattr(plant, "hydro_info", None)
         nav = NavigationSuite(plant.model, plant.data, navigation, seed, plant.layout.base_body,
-                              float(hydro.water.density) if hydro is not None else 1000.0, sink=nav_sink)
+                              float(hydro.water.density) if hydro is not None else 1000.0, sink=nav_sink,
+                              keep="all" if keep else "samples" if feedback == "estimate" else "none")
     est = None  # feedback = "estimate": the online ESKF, started at the first sample
     if feedback == "estimate" and (nav is None or layout is None):
         raise ValueError("feedback = 'estimate' needs navigation sensors on a robot with a free vehicle")
@@ -361,7 +389,9 @@ def run_closed_loop(
         applied = plant.joint_torques_applied if has_applied else torques
         if k == 0 and warm_start:
             plant.warm_start(thrust)
-        times[k] = t
+        if times is not None:
+            times[k] = t
+        t_last = t
         row = {**cmd.signals, "q_true": q_true, "qd_true": qd_true, "tip_true": tip_true, "q_measured": meas.q,
                "thrust_command": thrust,
                "thrust_force": thr_lagged if thr_lagged is not None and k > 0 else plant.thruster_forces,
@@ -383,11 +413,17 @@ def run_closed_loop(
             status, reason = "diverged", str(exc)
             break
     signals = rows.signals()
-    times = times[:len(rows)] if len(rows) == n else times[:len(rows)].copy()
-    ranges = plant_joint_ranges(plant.model)
-    meta = {"T": T, "dt": dt, "seed": seed, "controller": controller_name(controller), "joint_ranges": ranges}
-    if status == "ok" and ranges and "q_true" in signals:  # finished: did a joint leave the plant's range?
-        why = joint_limit_status(signals["q_true"], ranges, np.asarray(times))
+    if times is not None:
+        times = times[:len(rows)] if len(rows) == n else times[:len(rows)].copy()
+    else:
+        times = np.empty(0)
+    meta = {"T": T, "dt": dt, "seed": seed, "controller": controller_name(controller), "joint_ranges": ranges,
+            "samples": len(rows), "t_end": t_last if len(rows) else math.nan}
+    if status == "ok" and ranges:  # finished: did a joint leave the plant's range?
+        if acc is not None:
+            why = joint_limit_reason(acc.excursion)
+        else:
+            why = joint_limit_status(signals["q_true"], ranges, np.asarray(times)) if "q_true" in signals else ""
         if why:
             status, reason = "joint_limit", why
     resolved = getattr(controller, "resolved_params", None)  # parameters resolved at construction (RAC's thresholds)
@@ -401,4 +437,5 @@ def run_closed_loop(
         if status != "ok":
             reason = f"{reason}; MuJoCo warning: {warned[0]}"
     return RunResult(t=times, signals=signals, status=status, reason=reason, meta=meta,
-                     navigation=nav.record if nav is not None else None)
+                     navigation=nav.record if nav is not None else None,
+                     metrics=acc.result() if acc is not None else None)

@@ -346,6 +346,18 @@ class NavigationRecord:
         return [(t, kind, s) for t, _, kind, s in out]
 
 
+class _Dropped(list):
+    """A record field that keeps nothing (NavigationSuite ``keep`` other than "all"): appends are dropped."""
+
+    def append(self, _item) -> None:
+        pass
+
+
+#: The record's fields the online estimator reads (NavigationSuite keep="samples").
+_SAMPLE_FIELDS = ("imu", "imu_arrival", "dvl", "depth", "fix")
+_TRUTH_FIELDS = ("imu_gyro_bias", "imu_accel_bias", "dvl_ranges", "fix_outlier")
+
+
 class NavigationSuite:
     """The navigation sensors of one run on a model with :func:`add_to_spec`'s sensors (module
     docstring).
@@ -359,10 +371,17 @@ class NavigationSuite:
         sink: called with (kind, sample, extra) for every sample as it is taken (extra: a dict of
             what the sample's dataclass has no field for: the IMU's arrival time and true biases,
             the DVL's ranges and altitude, the depth's pressure, a fix's outlier flag).
+        keep: what :attr:`record` keeps: "all" (every sample and its truth), "samples" (the
+            samples the online estimator reads, which it drops once fed:
+            :class:`uvms_mj.estimation.online.OnlineEstimator` ``trim``) or "none" (the mounts and
+            sites only; the samples go to ``sink``): a run whose memory must not grow.
     """
 
     def __init__(self, model: mujoco.MjModel, data: mujoco.MjData, config: NavigationConfig, seed: int,
-                 base_body: int, water_density: float = 1000.0, sink: Callable | None = None) -> None:
+                 base_body: int, water_density: float = 1000.0, sink: Callable | None = None,
+                 keep: str = "all") -> None:
+        if keep not in ("all", "samples", "none"):
+            raise ValueError(f"NavigationSuite: keep = {keep!r}; allowed: all, samples, none")
         self.model, self.data, self.config = model, data, config
         self.dt = float(model.opt.timestep)
         self.base_body = int(base_body)
@@ -384,6 +403,9 @@ class NavigationSuite:
                 self.adr[kind][suffix] = int(model.sensor_adr[sid])
         self.rngs = {k: np.random.default_rng([int(seed), NAV_STREAM, i]) for i, k in enumerate(NAV_SENSORS)}
         self.record = NavigationRecord()
+        self.keep = keep
+        for name in (() if keep == "all" else _TRUTH_FIELDS if keep == "samples" else _TRUTH_FIELDS + _SAMPLE_FIELDS):
+            setattr(self.record, name, _Dropped())
         self._mounts()
         imu = config.imu
         if imu is not None:

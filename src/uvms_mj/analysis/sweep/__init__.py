@@ -82,7 +82,7 @@ Outputs (in ``--out-dir DIR``)
 * ``runs.jsonl``: one line per finished run, appended as runs finish (the resume record);
 * ``results.csv`` (and ``results.parquet`` when pyarrow is installed): one row per run:
   ``run_id, sample, controller, seed``, one column per axis, every metric of
-  :func:`uvms_mj.sim.experiment.metrics`, ``status`` (ok | diverged | joint_limit | error | crashed), ``reason``,
+  :func:`uvms_mj.sim.metrics.metrics`, ``status`` (ok | diverged | joint_limit | error | crashed), ``reason``,
   ``t_end`` (simulated time reached), ``wall_s``, ``log`` (MCAP path with ``--logs``, else
   empty), ``values`` (JSON: the value each varied field got), ``sets`` (JSON: the ``--set``
   arguments that reproduce the run with ``uvms-mj run SCENARIO``), ``key``;

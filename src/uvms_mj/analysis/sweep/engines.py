@@ -11,6 +11,7 @@ group: the sweep's process ends its workers)."""
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from collections.abc import Callable
@@ -144,7 +145,7 @@ def _execute_run(task: dict) -> dict:
         else:
             res = _run_scenario(sc)
         out["status"], out["reason"] = str(res.status), _one_line(res.reason)
-        out["t_end"] = float(res.t[-1]) if len(res.t) else 0.0
+        out["t_end"] = _t_end(res)
         try:
             out["metrics"] = {k: float(v) for k, v in metrics(res).items()}
         except Exception as exc:  # noqa: BLE001 - e.g. no sample at all
@@ -155,12 +156,21 @@ def _execute_run(task: dict) -> dict:
     return out
 
 
-def _run_scenario(scenario, sink=None):
+def _run_scenario(scenario, sink=None, keep=False):
     """uvms_mj.scenario.schema.run_scenario, imported when a run starts (a module attribute, so that
-    tests can replace it)."""
+    tests can replace it); streamed by default (``keep=False``: a worker's memory does not grow
+    with the run's duration)."""
     from uvms_mj.scenario.schema import run_scenario as rs
 
-    return rs(scenario, sink=sink)
+    return rs(scenario, sink=sink, keep=keep)
+
+
+def _t_end(res) -> float:
+    """The last sample's time [s] of a run (0 without one): its meta's ``t_end``, else its times."""
+    t = (res.meta or {}).get("t_end")
+    if t is None:
+        return float(res.t[-1]) if len(res.t) else 0.0
+    return 0.0 if math.isnan(t) else float(t)
 
 
 def _crashed(exc: BaseException) -> dict:

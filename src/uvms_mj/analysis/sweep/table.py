@@ -14,7 +14,7 @@ from uvms_mj.io.atomic import atomic_open, atomic_path
 from uvms_mj.analysis.sweep.plan import Run, SweepPlan, _jsonable
 from uvms_mj.analysis.sweep.spec import _is_num
 
-#: The metrics of :func:`uvms_mj.sim.experiment.metrics`, in table order (others found are appended).
+#: The metrics of :func:`uvms_mj.sim.metrics.metrics`, in table order (others found are appended).
 METRICS = ("base_pos_rms_mm", "base_pos_max_mm", "base_att_rms_mrad", "base_att_max_mrad", "tip_rms_mm",
            "tip_max_mm", "thrust_rms_N", "torque_rms_Nm", "saturated_s", "singular_s")
 
