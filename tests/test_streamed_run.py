@@ -61,6 +61,22 @@ def test_metrics_do_not_depend_on_how_the_samples_are_handed_in(paper_run, block
     assert _same(acc.result(), metrics(r))
 
 
+def test_the_accumulator_copies_what_it_keeps(paper_run):
+    """Blocks handed in through one reused buffer (as the streaming record does): the samples left
+    pending must not change when the caller overwrites its arrays."""
+    r, block = paper_run, 700  # not a divisor of BLOCK: samples stay pending between the calls
+    acc = RunMetrics(r.meta)
+    bufs = {k: np.empty((block,) + v.shape[1:], v.dtype) for k, v in r.signals.items()}
+    tbuf = np.empty(block)
+    for i in range(0, len(r.t), block):
+        m = len(r.t[i:i + block])
+        tbuf[:m] = r.t[i:i + block]
+        for k, v in r.signals.items():
+            bufs[k][:m] = v[i:i + block]
+        acc.add(tbuf[:m], {k: b[:m] for k, b in bufs.items()})
+    assert _same(acc.result(), metrics(r))
+
+
 def test_no_samples_gives_nan_never_raises():
     m = RunMetrics({"T": 0.02}).result()
     assert set(m) == set(METRIC_KEYS) and all(math.isnan(v) for v in m.values())

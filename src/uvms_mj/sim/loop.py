@@ -282,7 +282,6 @@ def run_closed_loop(
 
         rows = SampleRecord(n, on_block=block)
         times = None
-    t_last = math.nan
     status, reason = "ok", ""
     q_prev_meas = None
     mujoco_warnings(clear=True)  # only this run's
@@ -391,7 +390,6 @@ def run_closed_loop(
             plant.warm_start(thrust)
         if times is not None:
             times[k] = t
-        t_last = t
         row = {**cmd.signals, "q_true": q_true, "qd_true": qd_true, "tip_true": tip_true, "q_measured": meas.q,
                "thrust_command": thrust,
                "thrust_force": thr_lagged if thr_lagged is not None and k > 0 else plant.thruster_forces,
@@ -418,7 +416,7 @@ def run_closed_loop(
     else:
         times = np.empty(0)
     meta = {"T": T, "dt": dt, "seed": seed, "controller": controller_name(controller), "joint_ranges": ranges,
-            "samples": len(rows), "t_end": t_last if len(rows) else math.nan}
+            "samples": len(rows), "t_end": (len(rows) - 1) * T if len(rows) else math.nan}
     if status == "ok" and ranges:  # finished: did a joint leave the plant's range?
         if acc is not None:
             why = joint_limit_reason(acc.excursion)

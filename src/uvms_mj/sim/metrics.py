@@ -66,7 +66,7 @@ class RunMetrics:
     def __init__(self, meta: Mapping[str, Any] | None = None) -> None:
         self.meta = dict(meta or {})
         self._done = 0  # samples in the partials
-        self._pending: list[tuple[np.ndarray | None, dict[str, np.ndarray]]] = []
+        self._pending: tuple[np.ndarray | None, dict[str, np.ndarray]] | None = None  # < BLOCK samples
         self._sum: dict[str, list[float]] = {}  # key -> [sum of squares, count]
         self._max: dict[str, float] = {}
         self._count: dict[str, int] = {}
@@ -78,51 +78,45 @@ class RunMetrics:
     # -- input -----------------------------------------------------------------------------------
     def add(self, t: np.ndarray | None, signals: Mapping[str, np.ndarray]) -> None:
         """Samples that follow the ones added before: ``t`` (M,) [s] (None: unknown) and the
-        run's signals (name -> (M, ...)); the metrics' signals only are kept until used."""
+        run's signals (name -> (M, ...)); the metrics' signals only are kept until used (as
+        copies: the caller may reuse its arrays)."""
         s = {k: np.asarray(v) for k, v in signals.items() if k in METRIC_SIGNALS and np.ndim(v) >= 1}
+        t = None if t is None else np.asarray(t)
         m = {len(v) for v in s.values()} | ({len(t)} if t is not None else set())
         if not s or len(m) != 1:  # no metric signal, or signals of differing lengths (rows without some)
             self._flush(all_=True)
             if s:
-                self._block(None if t is None else np.asarray(t), s)
+                self._block(t, s)
             return
-        n = m.pop()
-        if n == 0:
+        if m.pop() == 0:
             return
-        if self._pending and set(s) != set(self._pending[-1][1]):  # other signals from here on
-            self._flush(all_=True)
-        self._pending.append((None if t is None else np.asarray(t), s))
+        if self._pending is not None:
+            pt, ps = self._pending
+            if set(s) != set(ps):  # other signals from here on
+                self._flush(all_=True)
+            else:  # the samples left over (fewer than a block) and these
+                t = None if pt is None or t is None else np.concatenate((pt, t))
+                s = {k: np.concatenate((ps[k], v)) for k, v in s.items()}
+        self._pending = (t, s)
         self._flush()
 
     def _flush(self, all_: bool = False) -> None:
-        """Partials of the pending samples, a block of BLOCK aligned samples at a time (the rest
-        too if ``all_``)."""
-        while self._pending:
-            have = sum(len(next(iter(s.values()))) for _, s in self._pending)
-            want = BLOCK - self._done % BLOCK
-            if have < want and not all_:
-                return
-            take = min(want, have)
-            t_parts, s_parts, rest, got = [], [], [], 0
-            for t, s in self._pending:
-                n = len(next(iter(s.values())))
-                if got >= take:
-                    rest.append((t, s))
-                    continue
-                use = min(n, take - got)
-                t_parts.append(None if t is None else t[:use])
-                s_parts.append({k: v[:use] for k, v in s.items()})
-                if use < n:
-                    rest.append((None if t is None else t[use:], {k: v[use:] for k, v in s.items()}))
-                got += use
-            self._pending = rest
-            if len(s_parts) == 1:
-                tb, sb = t_parts[0], s_parts[0]
-            else:
-                tb = None if any(x is None for x in t_parts) else np.concatenate(t_parts)
-                sb = {k: np.concatenate([p[k] for p in s_parts]) for k in s_parts[0]}
-            self._block(tb, sb)
+        """Partials of the pending samples, a block of BLOCK samples aligned on the run's sample
+        index at a time; the rest stays pending (a copy), unless ``all_``."""
+        if self._pending is None:
+            return
+        t, s = self._pending
+        n = len(next(iter(s.values())))
+        i = 0
+        while i < n:
+            take = min(BLOCK - self._done % BLOCK, n - i)
+            if take < BLOCK - self._done % BLOCK and not all_:
+                break
+            self._block(None if t is None else t[i:i + take], {k: v[i:i + take] for k, v in s.items()})
             self._done += take
+            i += take
+        self._pending = None if i == n else (None if t is None else t[i:].copy(),
+                                             {k: v[i:].copy() for k, v in s.items()})
 
     # -- partials of one block -------------------------------------------------------------------
     def _ss(self, key: str, x: np.ndarray, count: int | None = None) -> None:
