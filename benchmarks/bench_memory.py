@@ -23,7 +23,10 @@ RSS [MB] before -> after: paper info 5748 -> 89, plot 401 -> 241, csv 492 -> 115
 parquet 597 -> 200, render 478 -> 272, compare -> 385; station: see the report of branch mem-read.
 Measured on 2026-12-04 after the runs were streamed (``keep=False``: metrics accumulated, no
 sample kept): ``run --no-plots`` paper 98 MB at 60 s and 99 MB at 3600 s, station 96 and 97 MB;
-``sweep`` station 207 MB at both durations (README "Memory").
+``sweep`` station 207 MB at both durations (README "Memory"). After the figures read the log through
+``read_plot_log`` (a bounded min/max envelope), 60 / 1200 / 3600 s: ``plot`` paper 129 / 145 / 160 MB,
+station 125 / 161 / 184 MB; ``run --plots`` paper 151 / 175 / 175, station 148 / 189 / 199; ``compare``
+paper 143 / 163 / 191, station 145 / 170 / 188.
 """
 
 from __future__ import annotations

@@ -94,3 +94,20 @@ def added_and_passive(m: mujoco.MjModel, d: mujoco.MjData) -> tuple[np.ndarray, 
     full = np.zeros((m.nv, m.nv))
     mujoco.mj_fullM(m, d, full)
     return full - rigid, d.qfrc_passive.copy()
+
+
+def run_logs(folder, specs) -> dict:
+    """``uvms-mj run SCENARIO -o FOLDER/NAME.mcap --set duration=D`` (no plots, no video) for each
+    (name, scenario, duration) of ``specs``: name -> the log's path."""
+    from click.testing import CliRunner
+
+    from uvms_mj.cli.main import main
+
+    out = {}
+    for name, scenario, duration in specs:
+        path = folder / f"{name}.mcap"
+        result = CliRunner().invoke(main, ["run", scenario, "-o", str(path), "--no-plots", "--no-video",
+                                           "--set", f"duration={duration}"])
+        assert result.exit_code == 0, result.output
+        out[name] = path
+    return out

@@ -194,19 +194,12 @@ def test_read_log_in_small_batches_gives_the_rows(tmp_path, monkeypatch):
 def logs(tmp_path_factory):
     """A short paper log and a short BlueROV2 + Alpha log (uvms-mj run), and a copy of each cut
     inside its data (as kill -9 leaves one)."""
-    from click.testing import CliRunner
-
-    from uvms_mj.cli.main import main
+    from conftest import run_logs
 
     folder = tmp_path_factory.mktemp("memlogs")
-    out = {}
-    for name, scenario, duration in (("paper", "paper", "3"), ("robot", "bluerov2_alpha_station", "1.5")):
-        path = folder / f"{name}.mcap"
-        result = CliRunner().invoke(main, ["run", scenario, "-o", str(path), "--no-plots", "--no-video",
-                                           "--set", f"duration={duration}"])
-        assert result.exit_code == 0, result.output
-        out[name] = path
-        out[name + "-cut"] = _cut_copy(path, folder / f"{name}-cut.mcap")
+    out = run_logs(folder, (("paper", "paper", "3"), ("robot", "bluerov2_alpha_station", "1.5")))
+    for name in ("paper", "robot"):
+        out[name + "-cut"] = _cut_copy(out[name], folder / f"{name}-cut.mcap")
     return out
 
 

@@ -9,6 +9,7 @@ import os
 import signal
 import subprocess
 import sys
+import time
 import textwrap
 from pathlib import Path
 
@@ -508,6 +509,37 @@ def test_handle_sigterm_restores_the_handler():
                 pass
     assert signal.getsignal(signal.SIGTERM) is before
     assert issubclass(Terminated, KeyboardInterrupt)
+
+
+@pytest.mark.parametrize("sig, exc", [(signal.SIGTERM, Terminated), (signal.SIGINT, KeyboardInterrupt)])
+def test_a_signal_inside_a_finalizer_is_not_lost(monkeypatch, sig, exc):
+    """A signal whose handler runs inside a finalizer (a weakref callback: Python prints "Exception
+    ignored in ..." and drops what it raises; a sweep worker's rare stray line) interrupts the code
+    that runs after the finalizer, and nothing is printed."""
+    import weakref
+
+    from uvms_mj.io import interrupts
+
+    dropped = []
+    monkeypatch.setattr(sys, "unraisablehook", dropped.append)
+    monkeypatch.setattr(interrupts, "_signalled", False)
+
+    class Box:
+        pass
+
+    after = []
+    with handle_sigterm():
+        with pytest.raises(exc):
+            box = Box()
+            weakref.finalize(box, interrupts._on_signal, sig, None)  # the handler, as a finalizer runs it
+            del box  # the finalizer runs here and its exception is dropped by Python
+            after.append("finalized")
+            deadline = time.monotonic() + 5.0  # raised again 1 ms later (interrupts._AGAIN_S)
+            while time.monotonic() < deadline:
+                pass
+            after.append("not interrupted")
+    assert after == ["finalized"] and dropped == []
+    assert interrupts._again is None
 
 
 def test_flush_interval_bounds_the_data_at_risk(tmp_path, params):

@@ -218,14 +218,15 @@ def _load(path: str, sets: tuple[str, ...]):
         raise click.UsageError(str(exc)) from None
 
 
-def _read(path, signals=None) -> object:
+def _read(path, signals=None, reader=None) -> object:
     """read_log with bad files turned into a usage error (exit 2), never a traceback; ``signals``:
-    read only those (read_log's subset: what a plot or a video needs of a long log)."""
+    read only those (read_log's subset: what a plot or a video needs of a long log); ``reader``:
+    another reader with read_log's arguments (the figures': ``read_plot_log``)."""
     from uvms_mj.io.logfile import LogFileError
     from uvms_mj.io.recorder import read_log
 
     try:
-        return read_log(path, signals=signals)
+        return (reader or read_log)(path, signals=signals)
     except LogFileError as exc:
         raise click.UsageError(str(exc)) from None
     except (MemoryError, RecursionError) as exc:

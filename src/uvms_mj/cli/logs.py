@@ -73,13 +73,13 @@ def render(logs: tuple[str, ...], out: str | None, out_old: str | None, compare:
 @click.option("-o", "out_dir_old", type=click.Path(file_okay=False), default=None, hidden=True)
 def plot(log: str, out_dir: str | None, out_dir_old: str | None) -> None:
     """Paper-style time histories (Figs. 5 and 6) and control signals of LOG, as PNG."""
-    from uvms_mj.analysis.plots import PLOT_SIGNALS, plot_run, plot_run_paths
+    from uvms_mj.analysis.plots import PLOT_SIGNALS, plot_run, plot_run_paths, read_plot_log
 
     out_dir = out_dir or out_dir_old
     folder = _check_dir(Path(out_dir) if out_dir else Path(log).parent)
     for p in plot_run_paths(folder, Path(log).stem):
         _check_out(p, protect=(log,), kind="plot", option="--out-dir")
-    run_log = _read(log, PLOT_SIGNALS)
+    run_log = _read(log, PLOT_SIGNALS, reader=read_plot_log)
     try:
         folder.mkdir(parents=True, exist_ok=True)
         paths = plot_run(run_log, folder, stem=Path(log).stem)

@@ -88,12 +88,12 @@ def _live_server(port: int, pace: str, wait: float):
 def _plots(log_path: Path, echo=click.echo, protect: tuple = ()) -> None:
     """The plots of a run's log (its signals read from it); a run too short (or too broken) to
     plot gets a warning."""
-    from uvms_mj.analysis.plots import PLOT_SIGNALS, plot_run, plot_run_paths
+    from uvms_mj.analysis.plots import PLOT_SIGNALS, plot_run, plot_run_paths, read_plot_log
 
     for p in plot_run_paths(log_path.parent, log_path.stem):
         _check_out(p, protect=protect, kind="plot", option="--plots")
     try:
-        paths = plot_run(_read(log_path, PLOT_SIGNALS), log_path.parent, stem=log_path.stem)
+        paths = plot_run(_read(log_path, PLOT_SIGNALS, reader=read_plot_log), log_path.parent, stem=log_path.stem)
     except OSError as exc:
         _io_error(log_path.parent, exc)
     except (ValueError, KeyError, IndexError, TypeError) as exc:

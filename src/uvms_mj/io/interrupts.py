@@ -13,6 +13,7 @@ our code (the first ~0.05 s of a process) Python's default applies."""
 
 from __future__ import annotations
 
+import _thread
 import os
 import signal
 import sys
@@ -36,6 +37,12 @@ _partial: dict[str, int] = {}
 #: Called (in the main thread, from the signal handler) when the first signal arrives, before its
 #: exception is raised: e.g. a sweep's stop flag, so that its workers start no further run.
 _on_interrupt: list[Callable[[], None]] = []
+
+#: The interrupt :func:`_unraisable` caught where Python drops exceptions, for the handler's next
+#: call (:func:`_on_signal`) to raise again.
+_again: BaseException | None = None
+#: The unraisable hook :func:`_unraisable` hands everything else to.
+_previous_unraisable: list = [None]
 
 #: Seconds the orderly path (the log's close, a sweep's table) gets after the first SIGINT/SIGTERM
 #: before the command line's watchdog ends the process anyway (exit 130, files being written
@@ -85,11 +92,69 @@ def signalled() -> bool:
     return _signalled
 
 
+def _unraisable(args) -> None:
+    """``sys.unraisablehook`` once a signal has been handled: our interrupt, raised by the handler
+    where Python cannot propagate an exception (a signal that lands inside a finalizer, a weakref
+    callback or ``__del__``: Python would print "Exception ignored in ..." and drop it, and the
+    command would go on), is raised again: ``_thread.interrupt_main`` runs the handler in the main
+    thread 1 ms later (:func:`_interrupt_soon`), which raises it (:func:`_on_signal`; should that
+    be inside another finalizer, the same happens again). Anything else goes to the hook that was
+    there before."""
+    global _again
+    exc = args.exc_value
+    signum = getattr(exc, "uvms_mj_signal", None)
+    if signum is not None and threading.current_thread() is threading.main_thread():
+        _again = exc
+        _interrupt_soon(signum)
+        return
+    previous = _previous_unraisable[0] or sys.__unraisablehook__
+    previous(args)
+
+
+#: How long after :func:`_unraisable` the interrupt is raised again [s] (ours: 1 ms, time for the
+#: hook to return; the handler checks that it has).
+_AGAIN_S = 0.001
+
+
+def _interrupt_soon(signum: int) -> None:
+    """Run the handler of ``signum`` in the main thread :data:`_AGAIN_S` from now (a timer thread:
+    a handler tripped from the main thread itself would run inside the hook, or inside itself)."""
+    timer = threading.Timer(_AGAIN_S, _thread.interrupt_main, (signum,))
+    timer.daemon = True
+    timer.start()
+
+
+def _in_hook(frame) -> bool:
+    """Whether ``frame`` runs inside :func:`_unraisable` (where a raise would be dropped again)."""
+    while frame is not None:
+        if frame.f_code is _unraisable.__code__:
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _hook_unraisable() -> None:
+    if sys.unraisablehook is not _unraisable:
+        _previous_unraisable[0] = sys.unraisablehook
+        sys.unraisablehook = _unraisable
+
+
 def _on_signal(signum, frame) -> None:  # noqa: ARG001
     """The orderly handler: KeyboardInterrupt (Terminated for SIGTERM), held back inside a
     critical section; with the watchdog armed, later signals are the watchdog's (the orderly
-    path is not interrupted again)."""
-    global _pending, _signalled
+    path is not interrupted again). An interrupt Python dropped (:func:`_unraisable`) is raised
+    again by the next call."""
+    global _pending, _signalled, _again
+    if _again is not None:
+        if _in_hook(frame):  # still inside _unraisable: once it has returned
+            _interrupt_soon(signum)
+            return
+        exc, _again = _again, None
+        if _critical_depth:
+            if _pending is None:
+                _pending = exc
+            return
+        raise exc
     if _signalled and _watchdog_armed:
         return
     first = not _signalled
@@ -104,6 +169,8 @@ def _on_signal(signum, frame) -> None:  # noqa: ARG001
         exc: BaseException = Terminated("terminated by SIGTERM")
     else:
         exc = KeyboardInterrupt("interrupted by SIGINT")
+    exc.uvms_mj_signal = signum  # type: ignore[attr-defined]  (for _unraisable)
+    _hook_unraisable()
     if _critical_depth:
         if _pending is None:
             _pending = exc

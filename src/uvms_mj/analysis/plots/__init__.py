@@ -15,8 +15,11 @@ deg, joint angles in rad. Figures have fixed margins (:data:`uvms_mj.analysis.pl
 not matplotlib's constrained layout: it measured every text twice per save, half of a figure's time.
 
 Errors are desired minus true: ``p_desired`` against ``q_true`` (base) and ``tip_true`` (tip).
-A log is anything with ``.t``, ``.signals`` (name -> array) and ``.meta``: a ``RunResult`` or a
-log read back from disk. Signals a controller does not produce (the pd baseline has no f_E_hat
+A log is anything with ``.t``, ``.signals`` (name -> array) and ``.meta``: a ``RunResult``, a
+log read back from disk, or one read for its figures by :func:`read_plot_log` (in memory that does
+not grow with the run: a long log thinned to the min/max envelope of its samples, with the
+statistics the figures print computed over every sample; what ``uvms-mj plot``, ``run --plots`` and
+the ``compare`` figure use). Signals a controller does not produce (the pd baseline has no f_E_hat
 or singular_phase) are skipped with a note in their panel.
 
 Figures are built on :class:`matplotlib.figure.Figure` directly (no pyplot), so importing this
@@ -34,9 +37,10 @@ import numpy as np
 # floating robot's (logs with meta["robot"]). This module picks one for each log.
 from uvms_mj.analysis.plots.paper import _plot_paper_comparison, _plot_paper_run, tracking_errors
 from uvms_mj.analysis.plots.robot import _plot_robot_comparison, _plot_robot_run, _robot, attitude_error, robot_errors
+from uvms_mj.analysis.plots.envelope import read_plot_log
 
 __all__ = ["COMPARE_SIGNALS", "PLOT_SIGNALS", "attitude_error", "plot_run", "plot_run_paths", "plot_comparison",
-           "robot_errors", "tracking_errors"]
+           "read_plot_log", "robot_errors", "tracking_errors"]
 
 #: The signals :func:`plot_comparison` reads (:func:`tracking_errors`, :func:`robot_errors`): a log
 #: read for the comparison needs only these (``read_log(path, signals=COMPARE_SIGNALS)``).
@@ -82,16 +86,14 @@ def plot_run(log, out_dir: str | Path, stem: str = "run") -> list[Path]:
 
 
 def _slim(log):
-    """A log given by its path: read (:data:`COMPARE_SIGNALS`), with only what
-    :func:`tracking_errors` / :func:`robot_errors` read of it (q_true's base columns; a robot's
+    """A log given by its path: read (:data:`COMPARE_SIGNALS`, by :func:`read_plot_log`: in bounded
+    memory), with only what :func:`tracking_errors` / :func:`robot_errors` read of it (q_true's base columns; a robot's
     e_position / e_attitude only where base_desired is missing). Other logs: as given."""
     if not isinstance(log, (str, Path)):
         return log
     from types import SimpleNamespace
 
-    from uvms_mj.io.reader import read_log
-
-    full = read_log(log, signals=COMPARE_SIGNALS)
+    full = read_plot_log(log, signals=COMPARE_SIGNALS)
     sig = dict(full.signals)
     robot = _robot(full) is not None
     q = sig.get("q_true")
@@ -106,7 +108,8 @@ def _slim(log):
     else:
         for name in ("base_desired", "tip_desired", "e_position", "e_attitude"):
             sig.pop(name, None)
-    return SimpleNamespace(t=full.t, signals=sig, meta=full.meta, status=full.status, reason=full.reason)
+    return SimpleNamespace(t=full.t, signals=sig, meta=full.meta, status=full.status, reason=full.reason,
+                           error_stats=full.error_stats)
 
 
 def plot_comparison(logs: Mapping[str, Any], out_path: str | Path) -> Path:
@@ -117,8 +120,9 @@ def plot_comparison(logs: Mapping[str, Any], out_path: str | Path) -> Path:
 
     Args:
         logs: label (e.g. controller name) -> log of the same scenario, or the path of its MCAP
-            log: read one at a time, only :data:`COMPARE_SIGNALS`, and each kept as the few
-            columns the errors need (what bounds the memory of ``uvms-mj compare`` on long runs).
+            log: read one at a time, only :data:`COMPARE_SIGNALS`, by :func:`read_plot_log` (a long
+            log thinned to its min/max envelope, the statistics of the whole log) and each kept as
+            the few columns the errors need (what bounds the memory of ``uvms-mj compare``).
         out_path: the PNG to write (folders are created).
 
     Robot logs (all of them; :func:`plot_run`): the base position error norm [mm], the attitude

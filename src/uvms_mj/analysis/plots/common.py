@@ -3,10 +3,12 @@ number formatting (matplotlib's Figure directly, never pyplot), and the decimati
 figure's memory independent of the run's length: every line added to one of our figures keeps at
 most :data:`MAX_LINE_POINTS` points (:func:`decimate`: per bucket of consecutive samples its
 first and last point and the points of its smallest and largest x and y, so that every peak
-stays visible); the numbers a figure prints (RMS, max) come from the full data."""
+stays visible); the numbers a figure prints (RMS, max) come from the full data (:func:`error_stats`:
+the log's own where :func:`uvms_mj.analysis.plots.envelope.read_plot_log` has thinned it)."""
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Mapping
 
 import numpy as np
@@ -154,7 +156,9 @@ def _runs(mask: np.ndarray) -> list[tuple[int, int]]:
 
 
 def _shade(ax: Axes, t: np.ndarray, mask: np.ndarray, color: str, alpha: float = 0.25) -> bool:
-    dt = float(np.median(np.diff(t))) if len(t) > 1 else 0.0
+    # the sample period: the smallest step (a log thinned by read_plot_log keeps consecutive samples
+    # at its buckets' edges; its median step is a bucket's)
+    dt = float(np.min(np.diff(t))) if len(t) > 1 else 0.0
     any_ = False
     for a, b in _runs(mask):
         ax.axvspan(t[a], t[b - 1] + dt, color=color, alpha=alpha, lw=0, zorder=0)
@@ -208,5 +212,62 @@ def _g(x: float) -> str:
     return f"{x:.3g}" if (x == 0 or 1e-3 <= abs(x) < 1e4) else f"{x:.2e}"
 
 
-def _rms(x: np.ndarray) -> float:
-    return float(np.sqrt(np.mean(np.square(x)))) if x.size else float("nan")
+@dataclass(frozen=True)
+class ErrorStats:
+    """The statistics a figure prints of one tracking error (N, m) (or (N,): m = 1), over its finite
+    values [the error's units]: per column ``rms`` and ``absmax`` (max |e_j|), and of the row norm
+    |e| its ``norm_rms`` and ``norm_max`` (NaN where nothing is finite)."""
+
+    rms: tuple[float, ...]
+    absmax: tuple[float, ...]
+    norm_rms: float
+    norm_max: float
+
+
+class ErrorSums:
+    """:class:`ErrorStats` of errors given block by block (``add`` a dict key -> array per block,
+    then ``stats()``): sums of squares, counts and maxima, so the result is that of the whole
+    arrays (to rounding: the sums are added in block order)."""
+
+    def __init__(self) -> None:
+        self._acc: dict[str, list] = {}
+
+    def add(self, errors: Mapping[str, np.ndarray]) -> None:
+        for key, e in errors.items():
+            e = np.asarray(e, dtype=float)
+            e = e.reshape(len(e), -1)
+            ok = np.isfinite(e)
+            z = np.where(ok, e, 0.0)
+            norm = np.linalg.norm(e, axis=1)
+            nok = np.isfinite(norm)
+            part = [np.sum(z * z, axis=0), ok.sum(axis=0),
+                    np.max(np.where(ok, np.abs(e), -np.inf), axis=0, initial=-np.inf),
+                    float(np.sum(np.square(norm[nok]))), int(nok.sum()),
+                    float(np.max(norm[nok], initial=-np.inf))]
+            acc = self._acc.get(key)
+            if acc is None or len(acc[0]) != e.shape[1]:
+                self._acc[key] = part
+                continue
+            acc[0], acc[1], acc[2] = acc[0] + part[0], acc[1] + part[1], np.maximum(acc[2], part[2])
+            acc[3], acc[4], acc[5] = acc[3] + part[3], acc[4] + part[4], max(acc[5], part[5])
+
+    def stats(self) -> dict[str, ErrorStats]:
+        nan = float("nan")
+        out = {}
+        for key, (ss, n, mx, nss, nn, nmx) in self._acc.items():
+            rms = tuple(float(np.sqrt(s / c)) if c else nan for s, c in zip(ss, n))
+            absmax = tuple(float(v) if c else nan for v, c in zip(mx, n))
+            out[key] = ErrorStats(rms, absmax, float(np.sqrt(nss / nn)) if nn else nan, nmx if nn else nan)
+        return out
+
+
+def error_stats(log, errors: Mapping[str, np.ndarray]) -> dict[str, ErrorStats]:
+    """The statistics of a log's errors the figures print: the log's own ``error_stats`` where it
+    has them (:func:`uvms_mj.analysis.plots.envelope.read_plot_log`: of the whole log, whose samples
+    it has thinned), else those of ``errors`` (the arrays the figure draws)."""
+    given = getattr(log, "error_stats", None)
+    if isinstance(given, Mapping) and set(errors) <= set(given):
+        return dict(given)
+    sums = ErrorSums()
+    sums.add(errors)
+    return sums.stats()

@@ -14,7 +14,7 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from uvms_mj.analysis.plots.common import (_DPI, _XY, _dig, _finish, _g, _headroom, _label, _meta, _missing,
-                                           _new_figure, _rms, _shade, _shade_phases, _sig)
+                                           _new_figure, _shade, _shade_phases, _sig, error_stats)
 
 _THR = ("#1f77b4", "#ff7f0e", "#2ca02c")
 
@@ -101,6 +101,7 @@ def _stick(q: np.ndarray, geom) -> tuple[np.ndarray, np.ndarray]:
 def _tracking_figure(log, title: str) -> Figure:
     t = np.asarray(log.t, dtype=float)
     e = tracking_errors(log)
+    stats = error_stats(log, e)  # of the whole log (a thinned log carries its own)
     pd, q, tip = _sig(log, "p_desired"), _sig(log, "q_true"), _sig(log, "tip_true")
     phase = _sig(log, "singular_phase")
     fig, ax = _new_figure(3, 2, (13, 10))
@@ -111,7 +112,7 @@ def _tracking_figure(log, title: str) -> Figure:
     if "base" in e:
         for j, name in enumerate("xy"):
             a.plot(t, 1e3 * e["base"][:, j], color=_XY[j], lw=1.2,
-                   label=f"$e_{{{name}}}$ (rms {_g(1e3 * _rms(e['base'][:, j]))} mm)")
+                   label=f"$e_{{{name}}}$ (rms {_g(1e3 * stats['base'].rms[j])} mm)")
     else:
         _missing(a, "no p_desired / q_true in this log")
     _finish(a, "error [mm]", "(a) base position error (desired - true)")
@@ -119,7 +120,7 @@ def _tracking_figure(log, title: str) -> Figure:
     a = ax[0, 1]
     if "att" in e:
         a.plot(t, 1e3 * e["att"], color="#2ca02c", lw=1.2,
-               label=rf"$e_{{\phi_0}}$ (rms {_g(1e3 * _rms(e['att']))} mrad)")
+               label=rf"$e_{{\phi_0}}$ (rms {_g(1e3 * stats['att'].rms[0])} mrad)")
     else:
         _missing(a, "no p_desired / q_true in this log")
     _finish(a, "error [mrad]", r"(b) base attitude error $\phi_{0,d} - \phi_0$")
@@ -128,7 +129,7 @@ def _tracking_figure(log, title: str) -> Figure:
     if "tip" in e:
         for j, name in enumerate("xy"):
             a.plot(t, 1e3 * e["tip"][:, j], color=_XY[j], lw=1.2,
-                   label=f"$e_{{{name}}}$ (rms {_g(1e3 * _rms(e['tip'][:, j]))} mm)")
+                   label=f"$e_{{{name}}}$ (rms {_g(1e3 * stats['tip'].rms[j])} mm)")
     else:
         _missing(a, "no p_desired / tip_true in this log")
     _finish(a, "error [mm]", "(c) end-tip position error (desired - true)")
@@ -319,29 +320,33 @@ def _plot_paper_comparison(logs: Mapping[str, Any], out_path: Path) -> Path:
     ax = ax[:, 0]
     fig.suptitle("controller comparison: tracking errors (desired - true)", fontsize=13)
     colors = ["#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e377c2", "#17becf"]
-    panels: list[list[tuple[str, str, np.ndarray, np.ndarray]]] = [[], [], []]
+    # per run and panel: (label, colour, t, y, rms, max |y|); the statistics of the whole log
+    panels: list[list[tuple]] = [[], [], []]
     for k, (label, log) in enumerate(logs.items()):
         t = np.asarray(log.t, dtype=float)
         e = tracking_errors(log)
+        st = error_stats(log, e)
         c = colors[k % len(colors)]
         if "base" in e:
-            panels[0].append((label, c, t, 1e3 * np.hypot(e["base"][:, 0], e["base"][:, 1])))
+            panels[0].append((label, c, t, 1e3 * np.hypot(e["base"][:, 0], e["base"][:, 1]),
+                              1e3 * st["base"].norm_rms, 1e3 * st["base"].norm_max))
         if "att" in e:
-            panels[1].append((label, c, t, 1e3 * e["att"]))
+            panels[1].append((label, c, t, 1e3 * e["att"], 1e3 * st["att"].rms[0], 1e3 * st["att"].absmax[0]))
         if "tip" in e:
-            panels[2].append((label, c, t, 1e3 * np.hypot(e["tip"][:, 0], e["tip"][:, 1])))
+            panels[2].append((label, c, t, 1e3 * np.hypot(e["tip"][:, 0], e["tip"][:, 1]),
+                              1e3 * st["tip"].norm_rms, 1e3 * st["tip"].norm_max))
     titles = ("(a) base position error norm", r"(b) base attitude error $\phi_{0,d} - \phi_0$",
               "(c) end-tip position error norm")
     units = ("mm", "mrad", "mm")
     t_lo, t_hi = np.inf, -np.inf
     for i, (a, series) in enumerate(zip(ax, panels)):
-        peaks = [float(np.max(np.abs(y))) for *_, y in series if len(y)]
+        peaks = [peak for *_, y, _, peak in series if len(y)]
         log_scale = len(peaks) > 1 and min(peaks) > 0 and max(peaks) / min(peaks) > 30
         positive = []
-        for label, c, t, y in series:
+        for label, c, t, y, rms, peak in series:
             if len(t):
                 t_lo, t_hi = min(t_lo, float(t[0])), max(t_hi, float(t[-1]))
-            stats = f"rms {_g(_rms(y))}, max {_g(float(np.max(np.abs(y))))} {units[i]}"
+            stats = f"rms {_g(rms)}, max {_g(peak)} {units[i]}"
             a.plot(t, np.abs(y) if log_scale else y, color=c, lw=1.2, label=f"{label} ({stats})")
             positive.append(np.abs(y)[np.abs(y) > 0])
         ylabel = f"|error| [{units[i]}]" if (i != 1 or log_scale) else f"error [{units[i]}]"

@@ -13,7 +13,8 @@ from uvms_mj.io.atomic import atomic_path
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from uvms_mj.analysis.plots.common import _DPI, _finish, _g, _headroom, _label, _missing, _new_figure, _rms, _sig
+from uvms_mj.analysis.plots.common import (_DPI, ErrorStats, _finish, _g, _headroom, _label, _missing, _new_figure,
+                                           _sig, error_stats)
 
 # The vehicle's free joint comes first in qpos (x, y, z [m] world, qw, qx, qy, qz) and the arm
 # joints follow (one angle each), as in every built-in robot (uvms_mj.plant.robot); velocities:
@@ -108,11 +109,13 @@ def _desired_true(a: Axes, t: np.ndarray, true: np.ndarray, desired: np.ndarray 
         a.plot(t, true[:, j], "-", color=c, lw=1.1, label=name if desired is None else f"{name} actual")
 
 
-def _error_lines(a: Axes, t: np.ndarray, e: np.ndarray, scale: float, unit: str, labels: list[str]) -> None:
+def _error_lines(a: Axes, t: np.ndarray, e: np.ndarray, scale: float, unit: str, labels: list[str],
+                 stats: ErrorStats) -> None:
+    """The error's columns and norm; ``stats``: the whole log's (:func:`error_stats`)."""
     for j, name in enumerate(labels):
-        a.plot(t, scale * e[:, j], color=_XYZ[j], lw=1.1, label=f"{name} (rms {_g(scale * _rms(e[:, j]))} {unit})")
+        a.plot(t, scale * e[:, j], color=_XYZ[j], lw=1.1, label=f"{name} (rms {_g(scale * stats.rms[j])} {unit})")
     norm = scale * np.linalg.norm(e, axis=1)
-    a.plot(t, norm, color="k", lw=1.3, label=f"norm (max {_g(float(np.nanmax(norm)))} {unit})")
+    a.plot(t, norm, color="k", lw=1.3, label=f"norm (max {_g(scale * stats.norm_max)} {unit})")
 
 
 def _robot_tracking_figure(log, robot: Mapping[str, Any], title: str) -> Figure:
@@ -121,6 +124,7 @@ def _robot_tracking_figure(log, robot: Mapping[str, Any], title: str) -> Figure:
     if bd is not None and bd.shape[1] < 7:
         bd = None
     e = robot_errors(log)
+    stats = error_stats(log, e)  # of the whole log (a thinned log carries its own)
     base = robot.get("layout", {}).get("base", "vehicle") if isinstance(robot.get("layout"), Mapping) else "vehicle"
     fig, ax = _new_figure(3, 2, (13, 10.5))
     fig.suptitle(title, fontsize=13)
@@ -144,7 +148,7 @@ def _robot_tracking_figure(log, robot: Mapping[str, Any], title: str) -> Figure:
 
     a = ax[1, 0]
     if "base" in e:
-        _error_lines(a, t, e["base"], 1e3, "mm", ["$e_x$", "$e_y$", "$e_z$"])
+        _error_lines(a, t, e["base"], 1e3, "mm", ["$e_x$", "$e_y$", "$e_z$"], stats["base"])
     else:
         _missing(a, "not logged (no base_desired / e_position)")
     _finish(a, "error [mm]", "(c) base position error (desired - true), world frame")
@@ -152,7 +156,8 @@ def _robot_tracking_figure(log, robot: Mapping[str, Any], title: str) -> Figure:
     a = ax[1, 1]
     if "att" in e:
         # mrad, the metrics table's unit for attitude errors (base_att_rms_mrad)
-        _error_lines(a, t, e["att"], 1e3, "mrad", [r"$e_{\theta x}$", r"$e_{\theta y}$", r"$e_{\theta z}$"])
+        _error_lines(a, t, e["att"], 1e3, "mrad", [r"$e_{\theta x}$", r"$e_{\theta y}$", r"$e_{\theta z}$"],
+                     stats["att"])
     else:
         _missing(a, "not logged (no base_desired / e_attitude)")
     _finish(a, "error [mrad]", "(d) attitude error (rotation vector, body frame)")
@@ -173,7 +178,7 @@ def _robot_tracking_figure(log, robot: Mapping[str, Any], title: str) -> Figure:
     a = ax[2, 1]
     tip = _sig(log, "tip_true")
     if "tip" in e:
-        _error_lines(a, t, e["tip"], 1e3, "mm", ["$e_x$", "$e_y$", "$e_z$"])
+        _error_lines(a, t, e["tip"], 1e3, "mm", ["$e_x$", "$e_y$", "$e_z$"], stats["tip"])
         _finish(a, "error [mm]", "(f) end-tip position error (desired - true), world frame")
     elif tip is not None and tip.ndim == 2 and tip.shape[1] == 3 and np.isfinite(tip).any():
         _desired_true(a, t, tip, None, xyz)
@@ -271,15 +276,14 @@ def _plot_robot_run(log, robot: Mapping[str, Any], out: Path, stem: str) -> list
     return paths
 
 
-def _norm_panel(a: Axes, series: list[tuple[str, str, np.ndarray, np.ndarray]], title: str, unit: str,
-                missing: list[str]) -> None:
-    """Error norms (>= 0) of several runs; log scale when their peaks differ by more than 30x;
-    ``missing``: the runs that did not log this error (noted in the panel)."""
-    peaks = [float(np.nanmax(y)) for *_, y in series if len(y) and np.isfinite(y).any()]
+def _norm_panel(a: Axes, series: list[tuple], title: str, unit: str, missing: list[str]) -> None:
+    """Error norms (>= 0) of several runs, ``(label, colour, t, y, rms, max)`` (the statistics of the
+    whole log); log scale when their peaks differ by more than 30x; ``missing``: the runs that did
+    not log this error (noted in the panel)."""
+    peaks = [peak for *_, y, _, peak in series if len(y) and np.isfinite(peak)]
     log_scale = len(peaks) > 1 and min(peaks) > 0 and max(peaks) / min(peaks) > 30
-    for label, c, t, y in series:
-        ok = np.isfinite(y)
-        stats = f"rms {_g(_rms(y[ok]))}, max {_g(float(np.max(y[ok])) if ok.any() else float('nan'))} {unit}"
+    for label, c, t, y, rms, peak in series:
+        stats = f"rms {_g(rms)}, max {_g(peak)} {unit}"
         a.plot(t, y, color=c, lw=1.2, label=f"{label} ({stats})")
     _finish(a, f"|error| [{unit}]", title + (" (log scale)" if log_scale else ""), legend=False, zero=not log_scale)
     if log_scale:
@@ -297,7 +301,7 @@ def _plot_robot_comparison(logs: Mapping[str, Any], out_path: Path) -> Path:
     fig, ax = _new_figure(3, 1, (11, 9.5))
     ax = ax[:, 0]
     fig.suptitle("controller comparison: tracking errors (desired - true)", fontsize=13)
-    panels: list[list[tuple[str, str, np.ndarray, np.ndarray]]] = [[], [], []]
+    panels: list[list[tuple]] = [[], [], []]
     scale = (1e3, 1e3, 1e3)  # mm, mrad, mm: the metrics table's units
     t_lo, t_hi = np.inf, -np.inf
     for k, (label, log) in enumerate(logs.items()):
@@ -305,9 +309,11 @@ def _plot_robot_comparison(logs: Mapping[str, Any], out_path: Path) -> Path:
         if len(t):
             t_lo, t_hi = min(t_lo, float(t[0])), max(t_hi, float(t[-1]))
         e = robot_errors(log)
+        st = error_stats(log, e)
         for i, key in enumerate(("base", "att", "tip")):
             if key in e:
-                panels[i].append((label, _COLORS[k % len(_COLORS)], t, scale[i] * np.linalg.norm(e[key], axis=1)))
+                panels[i].append((label, _COLORS[k % len(_COLORS)], t, scale[i] * np.linalg.norm(e[key], axis=1),
+                                  scale[i] * st[key].norm_rms, scale[i] * st[key].norm_max))
     for a, series, title, unit in zip(ax, panels, ("(a) base position error norm, world frame",
                                                    "(b) attitude error angle (rotation vector norm)",
                                                    "(c) end-tip position error norm, world frame"),
