@@ -42,7 +42,7 @@ _on_interrupt: list[Callable[[], None]] = []
 #: call (:func:`_on_signal`) to raise again.
 _again: BaseException | None = None
 #: The unraisable hook :func:`_unraisable` hands everything else to.
-_previous_unraisable: list = [None]
+_previous_unraisable: Callable | None = None
 
 #: Seconds the orderly path (the log's close, a sweep's table) gets after the first SIGINT/SIGTERM
 #: before the command line's watchdog ends the process anyway (exit 130, files being written
@@ -107,8 +107,7 @@ def _unraisable(args) -> None:
         _again = exc
         _interrupt_soon(signum)
         return
-    previous = _previous_unraisable[0] or sys.__unraisablehook__
-    previous(args)
+    (_previous_unraisable or sys.__unraisablehook__)(args)
 
 
 #: How long after :func:`_unraisable` the interrupt is raised again [s] (ours: 1 ms, time for the
@@ -134,8 +133,9 @@ def _in_hook(frame) -> bool:
 
 
 def _hook_unraisable() -> None:
+    global _previous_unraisable
     if sys.unraisablehook is not _unraisable:
-        _previous_unraisable[0] = sys.unraisablehook
+        _previous_unraisable = sys.unraisablehook
         sys.unraisablehook = _unraisable
 
 

@@ -26,35 +26,53 @@ _DPI = 110
 MAX_LINE_POINTS = 8000
 
 
+def _firsts(rows: np.ndarray, pos: np.ndarray) -> np.ndarray:
+    """Of the rows (sorted indices into the bucket positions ``pos``), the first of each bucket."""
+    if not len(rows):
+        return rows
+    p = pos[rows]
+    return rows[np.r_[True, p[1:] != p[:-1]]]
+
+
+def _select(index: np.ndarray, K: np.ndarray, size: int) -> np.ndarray:
+    """Positions (sorted) of the samples to keep: per bucket ``index // size`` (``index``: the
+    samples' increasing indices, consecutive or not) its first and last sample and, per column of
+    K (n, C), its first smallest, first largest and first NaN value. What :func:`decimate` keeps of a
+    line and :mod:`uvms_mj.analysis.plots.envelope` of a log."""
+    n = len(index)
+    if not n:
+        return np.zeros(0, dtype=np.int64)
+    b = index // size
+    new = np.r_[True, b[1:] != b[:-1]]
+    starts = np.flatnonzero(new)
+    pos = np.cumsum(new) - 1  # each sample's bucket (0 ...)
+    picks = [starts, np.r_[starts[1:] - 1, n - 1]]
+    for c in range(K.shape[1]):
+        v = K[:, c]
+        nan = np.isnan(v)
+        lo = np.minimum.reduceat(np.where(nan, np.inf, v), starts)
+        hi = np.maximum.reduceat(np.where(nan, -np.inf, v), starts)
+        picks.append(_firsts(np.flatnonzero(v == lo[pos]), pos))
+        picks.append(_firsts(np.flatnonzero(v == hi[pos]), pos))
+        if nan.any():
+            picks.append(_firsts(np.flatnonzero(nan), pos))
+    return np.unique(np.concatenate(picks))
+
+
 def decimate(x: np.ndarray, y: np.ndarray, max_points: int = MAX_LINE_POINTS) -> np.ndarray:
     """Indices (sorted) of the points of the line (x, y) to draw: all of them if there are at
     most ``max_points``, else, for each of ``max_points // 8`` buckets of consecutive points, its
     first and last point, the points of its smallest and largest y and of its smallest and largest
-    x (a parametric path keeps its extent too) and its first NaN (a gap stays a gap). The
-    decimated line thus has the same minimum and maximum as the full one over every bucket."""
+    x (a parametric path keeps its extent too) and its first NaN (a gap stays a gap): :func:`_select`.
+    The decimated line thus has the same minimum and maximum as the full one over every bucket."""
     x, y = np.asarray(x), np.asarray(y)
     n = len(y)
     if max_points < 8:
         raise ValueError(f"decimate: max_points = {max_points!r}; allowed: >= 8")
     if n <= max_points:
         return np.arange(n)
-    nb = max_points // 8
-    size = -(-n // nb)  # ceil
-    pad = nb * size - n
-    picks = [np.arange(nb) * size, np.minimum(np.arange(1, nb + 1) * size - 1, n - 1)]
-    for v in (y, x):
-        v = np.asarray(v, dtype=float)
-        nan = np.isnan(v)
-        vp = np.pad(v, (0, pad), mode="edge").reshape(nb, size)
-        np_ = np.pad(nan, (0, pad), mode="edge").reshape(nb, size)
-        base = np.arange(nb) * size
-        picks.append(base + np.argmin(np.where(np_, np.inf, vp), axis=1))
-        picks.append(base + np.argmax(np.where(np_, -np.inf, vp), axis=1))
-        if nan.any():
-            has = np_.any(axis=1)
-            picks.append((base + np.argmax(np_, axis=1))[has])
-    idx = np.unique(np.concatenate(picks))
-    return idx[idx < n]
+    size = -(-n // (max_points // 8))  # ceil
+    return _select(np.arange(n), np.column_stack([np.asarray(y, dtype=float), np.asarray(x, dtype=float)]), size)
 
 
 class _DecimatingAxes(Axes):

@@ -29,7 +29,7 @@ from typing import Iterable
 
 import numpy as np
 
-from uvms_mj.analysis.plots.common import ErrorStats, ErrorSums
+from uvms_mj.analysis.plots.common import ErrorStats, ErrorSums, _select
 from uvms_mj.analysis.plots.paper import tracking_errors
 from uvms_mj.analysis.plots.robot import _robot, robot_errors
 
@@ -63,7 +63,7 @@ class PlotLog:
     error_stats: dict[str, ErrorStats] = field(default_factory=dict)
 
 
-def _columns(signals: dict, errors: dict) -> np.ndarray:
+def _columns(n: int, signals: dict, errors: dict) -> np.ndarray:
     """(n, C) float matrix of every numeric column of the block's signals, its errors and their norms."""
     cols = []
     for v in list(signals.values()) + list(errors.values()):
@@ -74,40 +74,7 @@ def _columns(signals: dict, errors: dict) -> np.ndarray:
     for e in errors.values():
         e = np.asarray(e, dtype=float)
         cols.append(np.linalg.norm(e.reshape(len(e), -1), axis=1)[:, None])
-    if not cols:
-        return np.zeros((len(next(iter(signals.values()), ())), 0))
-    return np.concatenate(cols, axis=1)
-
-
-def _firsts(rows: np.ndarray, pos: np.ndarray) -> np.ndarray:
-    """Of the rows (sorted indices into the bucket positions ``pos``), the first of each bucket."""
-    if not len(rows):
-        return rows
-    p = pos[rows]
-    return rows[np.r_[True, p[1:] != p[:-1]]]
-
-
-def _select(index: np.ndarray, K: np.ndarray, size: int) -> np.ndarray:
-    """Positions (sorted) of the samples to keep: per bucket ``index // size`` its first and last
-    sample and, per column of K, its first smallest, first largest and first NaN value."""
-    n = len(index)
-    if not n:
-        return np.zeros(0, dtype=np.int64)
-    b = index // size
-    new = np.r_[True, b[1:] != b[:-1]]
-    starts = np.flatnonzero(new)
-    pos = np.cumsum(new) - 1  # each sample's bucket (0 ...)
-    picks = [starts, np.r_[starts[1:] - 1, n - 1]]
-    for c in range(K.shape[1]):
-        v = K[:, c]
-        nan = np.isnan(v)
-        lo = np.minimum.reduceat(np.where(nan, np.inf, v), starts)
-        hi = np.maximum.reduceat(np.where(nan, -np.inf, v), starts)
-        picks.append(_firsts(np.flatnonzero(v == lo[pos]), pos))
-        picks.append(_firsts(np.flatnonzero(v == hi[pos]), pos))
-        if nan.any():
-            picks.append(_firsts(np.flatnonzero(nan), pos))
-    return np.unique(np.concatenate(picks))
+    return np.concatenate(cols, axis=1) if cols else np.zeros((n, 0))
 
 
 @dataclass
@@ -235,7 +202,7 @@ def read_plot_log(path: str | os.PathLike, signals: Iterable[str] | None = None,
             errors_of = robot_errors if _robot(st) is not None else tracking_errors
         errs = errors_of(_Block(block.t, block.signals, st.meta))
         sums.add(errs)
-        env.add(block.t, block.signals, _columns(block.signals, errs))
+        env.add(block.t, block.signals, _columns(len(block.t), block.signals, errs))
     _, t, sig = env.result(st.layout or {})
     return PlotLog(t=t, signals=sig, meta=st.meta, status=st.status, reason=st.reason, truncated=st.truncated,
                    path=str(path), samples=env.n, bucket=env.size, error_stats=sums.stats())
