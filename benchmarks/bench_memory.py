@@ -26,7 +26,9 @@ sample kept): ``run --no-plots`` paper 98 MB at 60 s and 99 MB at 3600 s, statio
 ``sweep`` station 207 MB at both durations (README "Memory"). After the figures read the log through
 ``read_plot_log`` (a bounded min/max envelope), 60 / 1200 / 3600 s: ``plot`` paper 129 / 145 / 160 MB,
 station 125 / 161 / 184 MB; ``run --plots`` paper 151 / 175 / 175, station 148 / 189 / 199; ``compare``
-paper 143 / 163 / 191, station 145 / 170 / 188.
+paper 143 / 163 / 191, station 145 / 170 / 188. After ``render`` read the log through
+``read_render_log`` (the envelope, frames streamed from a second pass): paper 191 / 224 / 235 MB,
+station 176 / 206 / 213 MB (was 294 MB at 3600 s).
 """
 
 from __future__ import annotations

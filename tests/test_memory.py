@@ -439,7 +439,7 @@ def test_plot_and_render_commands_read_a_subset(logs, tmp_path, monkeypatch):
     from click.testing import CliRunner
 
     from uvms_mj.analysis import plots, render
-    from uvms_mj.cli.logs import RENDER_SIGNALS
+    from uvms_mj.analysis.render_stream import RENDER_SIGNALS
     from uvms_mj.cli.main import main
 
     got = {}

@@ -1,4 +1,4 @@
-"""The figures' reader in bounded memory (issue 23 item 1): uvms_mj.analysis.plots.envelope.
+"""The figures' reader in bounded memory (issue 23 item 1): uvms_mj.analysis.envelope.
 
 Oracles: the log read whole (read_log) and numpy on its whole arrays: each bucket's minimum and
 maximum of every plotted column (signals, tracking errors, their norms), the errors' RMS and
@@ -12,8 +12,8 @@ import pytest
 
 from uvms_mj.analysis.plots import PLOT_SIGNALS, plot_run, read_plot_log, robot_errors, tracking_errors
 from uvms_mj.analysis.plots import common as plot_common
-from uvms_mj.analysis.plots.common import ErrorSums
-from uvms_mj.analysis.plots.envelope import _Envelope
+from uvms_mj.analysis.series import ErrorSums
+from uvms_mj.analysis.envelope import _Envelope
 
 
 @pytest.fixture(scope="module")

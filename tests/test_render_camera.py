@@ -99,7 +99,7 @@ def test_vehicle_and_tip_stay_in_the_frame(log, camera) -> None:
         geoms = [g for g in range(rp.model.ngeom) if rp.model.geom_bodyid[g] != 0 and rp.model.geom_group[g] < 3]
         sid = rp.model.site("alpha_tip").id
         spans = []
-        for q in rp.qs:
+        for q in rp.qpos_frames():
             eye, xmat, fovy = _camera_pose(rp, q)
             pts = np.vstack([rp.data.xpos[rp.layout.base_body], rp.data.site_xpos[sid]])
             pix, depth = project(pts, eye, xmat, fovy, W, H)
@@ -123,7 +123,8 @@ def test_follow_arm_sees_the_arm(log) -> None:
         assert model.camera(rp.cam).name == "follow_arm" == ROBOT_CAMERAS[0]
         hull = {g for g in range(model.ngeom) if model.geom_bodyid[g] in
                 (rp.layout.base_body, model.body("bluerov2_hull").id)}
-        for q in rp.qs[:: max(1, len(rp.qs) // 8)]:
+        qs = rp.qpos_frames()
+        for q in qs[:: max(1, len(qs) // 8)]:
             eye, xmat, _ = _camera_pose(rp, q)
             for target in (data.site_xpos[model.site("alpha_tip").id], data.xpos[model.body("alpha_wrist").id]):
                 vec = target - eye
@@ -131,7 +132,7 @@ def test_follow_arm_sees_the_arm(log) -> None:
                 dist = mujoco.mj_ray(model, data, eye, vec / np.linalg.norm(vec), None, 1, -1, geomid)
                 assert dist < 0 or int(geomid[0]) not in hull or dist > np.linalg.norm(vec) - 1e-3, \
                     model.geom(int(geomid[0])).name
-        eye, _, _ = _camera_pose(rp, rp.qs[0])
+        eye, _, _ = _camera_pose(rp, rp.qpos_frames()[0])
         ahead = (eye - data.xpos[rp.layout.base_body]) @ data.xmat[rp.layout.base_body].reshape(3, 3)[:, 0]
         assert ahead > 0.2
     finally:
@@ -145,7 +146,7 @@ def test_scale_bar_is_the_projection_of_a_length_at_the_vehicle(log) -> None:
     that long (+-1 px: it is a whole number of pixels)."""
     rp = _replay(log, labels=True)
     try:
-        eye, xmat, fovy = _camera_pose(rp, rp.qs[0])
+        eye, xmat, fovy = _camera_pose(rp, rp.qpos_frames()[0])
         base = rp.data.xpos[rp.layout.base_body]
         for axis in (0, 1):  # along the image's x and y axes
             ends = base + np.outer([-0.1, 0.1], xmat[:, axis])

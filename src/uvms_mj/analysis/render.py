@@ -18,11 +18,19 @@ world; framed on the robot's geometry and its paths by :mod:`.render_camera`; th
 tip path are drawn in world coordinates (m, z up). The scale bar holds at the vehicle's distance
 from the camera.
 
+A log read for a video (:func:`uvms_mj.analysis.render_stream.read_render_log`, what ``uvms-mj
+render`` and ``run --video`` use) is held in memory that does not grow with its length: the
+camera, the drawn paths and the compare inset come from the figures' min/max envelope of the log,
+and a long log's frames are interpolated from a second pass over its file, block by block
+(:class:`~uvms_mj.analysis.render_stream.FrameStates`); a short log (or a run) is replayed from its
+arrays, as before.
+
 The work is split by responsibility: :mod:`.render_gl` (the OpenGL backend, chosen when a
 renderer starts; :class:`RenderError`), :mod:`.render_overlay` (clock, labels, error inset),
 :mod:`.render_scene` (the paper robot's scene and replay), :mod:`.render_robot` (any floating
-robot's scene and replay); this module writes the videos and lays out comparisons, and re-exports
-the public names of the others, so ``uvms_mj.analysis.render`` stays the one import path.
+robot's scene and replay), :mod:`.render_stream` (the frames' states from blocks of samples);
+this module writes the videos and lays out comparisons, and re-exports the public names of the
+others, so ``uvms_mj.analysis.render`` stays the one import path.
 """
 
 from __future__ import annotations

@@ -21,6 +21,7 @@ from typing import Iterator, Mapping
 import numpy as np
 
 from uvms_mj.analysis.render_gl import _make_renderer
+from uvms_mj.analysis.series import robot_of
 from uvms_mj.analysis.render_overlay import (
     _RGBA_BASE,
     _RGBA_DESIRED,
@@ -42,6 +43,8 @@ from uvms_mj.analysis.render_scene import (
     _frame_times,
     _pose,
 )
+from uvms_mj.analysis.render_stream import (_STREAMED_ROBOT as _STREAMED, _streamed_span, continuous_quaternions, frame_states,
+                                           streamed_blocks)
 from uvms_mj.analysis.render_camera import DIRECTIONS, FOVY, FollowCamera, fit_camera, heading_frame, px_per_metre
 
 
@@ -66,16 +69,6 @@ _HEADLIGHT = ((0.18, 0.2, 0.22), (0.34, 0.36, 0.38))  # ambient, diffuse of the 
 _RGBA_BACKDROP = np.array([0.0, 0.0, 0.0, 1.0], dtype=np.float32)  # fully fogged: shows the water's colour
 _FACETS = (16, 8)  # numslices, numstacks of the replay's primitives (a 16-gon: smooth enough at 640 x 480)
 _SAND = (0.62, 0.57, 0.44)  # sea floor: sand
-
-
-def robot_of(log) -> dict | None:
-    """The log's robot description (``meta["robot"]``) when it is a robot log (name not
-    "paper"), else None (the paper's planar robot)."""
-    meta = getattr(log, "meta", None)
-    robot = meta.get("robot") if isinstance(meta, Mapping) else None
-    if not isinstance(robot, Mapping) or robot.get("name") in (None, "", "paper"):
-        return None
-    return dict(robot)
 
 
 def _robot_file(robot: dict, model_path: str | Path | None) -> Path:
@@ -111,14 +104,9 @@ def _quat_slots(model) -> list[int]:
 def interp_qpos(t: np.ndarray, ts: np.ndarray, q: np.ndarray, quat_slots: list[int]) -> np.ndarray:
     """``qpos`` samples q (N, nq) at ts, interpolated at times t (M,): positions and angles
     linearly, each quaternion by normalised linear interpolation (after choosing the sign of
-    each sample nearest the previous one, so that no interpolation goes the long way round)."""
-    q = np.array(q, dtype=float)
-    for a in quat_slots:
-        block = q[:, a:a + 4]
-        for k in range(1, len(block)):
-            if block[k] @ block[k - 1] < 0:
-                block[k] = -block[k]
-    out = _interp(t, ts, q)
+    each sample nearest the previous one, :func:`~.render_stream.continuous_quaternions`, so that
+    no interpolation goes the long way round)."""
+    out = _interp(t, ts, continuous_quaternions(q, quat_slots))
     for a in quat_slots:
         n = np.linalg.norm(out[:, a:a + 4], axis=1, keepdims=True)
         out[:, a:a + 4] /= np.where(n > 0, n, 1.0)
@@ -323,20 +311,14 @@ class _RobotReplay:
         q_log = _signal(log, "q_true")
         if q_log is None or q_log.ndim != 2 or len(q_log) != len(ts) or len(ts) < 1:
             raise ValueError("the log has no q_true signal matching its time base: nothing to replay")
-        ok = np.isfinite(ts) & np.isfinite(q_log).all(axis=1)
-        if not ok.any():
+        if not (np.isfinite(ts) & np.isfinite(q_log).all(axis=1)).any():
             raise ValueError("the log has no sample with a finite q_true: nothing to replay")
         n = len(ts)
-        tip = _finite_rows(_signal(log, "tip_true"), n, 3)
-        desired = _finite_rows(_signal(log, "tip_desired"), n, 3)
-        ts, q_log = ts[ok], q_log[ok]
-        tip = tip[ok] if tip is not None else None
-        desired = desired[ok] if desired is not None else None
-        if len(ts) == 1:  # a single sample: a still picture of 1 / fps
-            dup = lambda a: None if a is None else np.vstack([a, a])  # noqa: E731
-            ts, q_log, tip, desired = np.r_[ts, ts + 1.0 / fps], dup(q_log), dup(tip), dup(desired)
-        self.ts, self.speed, self.clock, self.height = ts, speed, clock, height
-        self.frame_t = _frame_times(ts, fps, speed, max_seconds)
+        # which series are drawn, decided on the whole log (or its envelope): the tip's trace
+        # (else the vehicle origin's) and the desired tip path
+        self._has_tip = _finite_rows(_signal(log, "tip_true"), n, 3) is not None
+        self._has_desired = _finite_rows(_signal(log, "tip_desired"), n, 3) is not None
+        self._log, self._base_qadr = log, None
 
         # framed: the part of the log (and of frame_also's) in the video, found the same way for both
         own = _framed_motion(log, max_seconds, speed)
@@ -344,21 +326,30 @@ class _RobotReplay:
         model, layout, cams = _robot_scene_model(robot, own[0], width, height, model_path, paths=tuple(own[1]),
                                                  also=also)
         self.model, self.layout = model, layout
+        self._base_qadr = layout.base_qadr
         self.data = mujoco.MjData(model)
-        self.qs = interp_qpos(self.frame_t, ts, q_log, _quat_slots(model))
+        whole = self._series(ts, {k: _signal(log, k) for k in _STREAMED})
+        if len(whole["q"][0]) == 1:  # a single sample: a still picture of 1 / fps
+            whole = {k: (np.r_[t, t + 1.0 / fps], np.vstack([x, x])) if len(t) else (t, x)
+                     for k, (t, x) in whole.items()}
+        self._whole = whole
+        ts = whole["q"][0]
+        self.ts, self.speed, self.clock, self.height = ts, speed, clock, height
+        span = _streamed_span(log, ["q_true"])
+        self.frame_t = _frame_times(np.asarray(span) if span is not None else ts, fps, speed, max_seconds)
+        self._quats = {"q": _quat_slots(model)}
         self.cam = self._camera(model, camera)
         follow = cams.get(model.camera(self.cam).name)
-        a = layout.base_qadr
-        trace_label = "tip trace"
-        if tip is None:  # no tip site (or none logged): trace the vehicle origin
-            tip, trace_label = q_log[:, a:a + 3], "vehicle trace"
-        self.tip, self.desired = tip, desired
-        self.trace_rgba = _RGBA_TRACE if trace_label == "tip trace" else _RGBA_BASE
-        self.tip_ok = np.isfinite(tip).all(axis=1)
-        self.tip_keep = _thin(_simplify(tip[self.tip_ok], _TRACE_TOL), 300)
+        trace_label = "tip trace" if self._has_tip else "vehicle trace"  # no tip: the vehicle origin
+        self.trace_rgba = _RGBA_TRACE if self._has_tip else _RGBA_BASE
+        # the drawn paths, simplified to within _TRACE_TOL and at most ~300 points
+        good_t, good = whole["tip"]
+        keep = _thin(_simplify(good, _TRACE_TOL), 300) if len(good) else np.zeros(0, dtype=int)
+        self.trace_t, self.trace_pts = good_t[keep], good[keep]
         self.desired_pts = None
-        if desired is not None:
-            d_ok = desired[np.isfinite(desired).all(axis=1)]
+        if self._has_desired:
+            d = whole["desired"][1]
+            d_ok = d[np.isfinite(d).all(axis=1)]
             self.desired_pts = d_ok[_thin(_simplify(d_ok, _TRACE_TOL), 300)]
         #: image scale at the vehicle's distance [px/m] (None for a camera of the model)
         self.px_per_m = px_per_metre(follow, height) if follow is not None else None
@@ -366,7 +357,7 @@ class _RobotReplay:
         if labels:
             self.overlay = _labels_overlay(width, height, title if title is not None else _controller_name(log),
                                            self.px_per_m, legend=True, trace_label=trace_label,
-                                           desired_label="desired tip path" if desired is not None else None,
+                                           desired_label="desired tip path" if self._has_desired else None,
                                            scale_note="at the vehicle")
         self.renderer = _make_renderer(model, height, width)
         self.renderer.scene.flags[mujoco.mjtRndFlag.mjRND_FOG] = True
@@ -415,13 +406,40 @@ class _RobotReplay:
         g.category = mujoco.mjtCatBit.mjCAT_DECOR
         scene.ngeom += 1
 
+    def _series(self, t: np.ndarray, signals: Mapping) -> dict:
+        """The replayed series of one block (or of the whole log): ``q`` (the finite q_true
+        samples), ``tip`` (of those, the ones with a finite tip; the vehicle origin without a
+        tip) and ``desired`` (tip_desired at the q samples, NaN rows kept)."""
+        t = np.asarray(t, dtype=float).ravel()
+        q = np.asarray(signals["q_true"], dtype=float)
+        ok = np.isfinite(t) & np.isfinite(q).all(axis=1)
+        out = {"q": (t[ok], q[ok])}
+        if self._has_tip:
+            tip = np.asarray(signals["tip_true"], dtype=float)
+            tok = ok & np.isfinite(tip).all(axis=1)
+            out["tip"] = (t[tok], tip[tok])
+        else:
+            a = self._base_qadr
+            out["tip"] = (t[ok], q[ok, a:a + 3])
+        if self._has_desired:
+            out["desired"] = (t[ok], np.asarray(signals["tip_desired"], dtype=float)[ok])
+        return out
+
+    def _states(self) -> Iterator[dict]:
+        """Each frame's states (:func:`~.render_stream.frame_states`): from the whole log, or
+        streamed again from a long log's file."""
+        stream = streamed_blocks(self._log, [k for k in _STREAMED if k in self._log.signals])
+        return frame_states(self.frame_t, self._whole, stream, self._series, self._quats)
+
+    def qpos_frames(self) -> np.ndarray:
+        """The replayed ``qpos`` of every frame (M, nq) (tests: holds every frame)."""
+        return np.array([s["q"][0] for s in self._states()])
+
     def __iter__(self) -> Iterator[tuple[float, np.ndarray]]:
-        ts, tip, renderer = self.ts, self.tip, self.renderer
+        renderer = self.renderer
         scene = renderer.scene
-        good_t = ts[self.tip_ok]
-        good = tip[self.tip_ok]
-        for tf, q in zip(self.frame_t, self.qs):
-            self.data.qpos[:] = q
+        for tf, state in zip(self.frame_t, self._states()):
+            self.data.qpos[:] = state["q"][0]
             _pose(self.model, self.data)
             renderer.update_scene(self.data, camera=self.cam)
             self._add_backdrop(scene)
@@ -429,14 +447,13 @@ class _RobotReplay:
                 # thin, 1 cm nearer the eye than the trace: both stay visible where they overlap
                 near = -0.01 * np.asarray(scene.camera[0].forward, dtype=float)
                 _add_polyline(scene, self.desired_pts + near, _RGBA_DESIRED, 2.0)
-                now = np.array([np.interp(tf, ts, self.desired[:, j]) for j in range(3)])
-                if np.isfinite(now).all():
+                now = state["desired"][0]
+                if now.size and np.isfinite(now).all():
                     _add_sphere(scene, now + near, 0.012, _RGBA_DESIRED)
-            if len(good):
-                k = int(np.searchsorted(good_t, tf, side="right"))
-                now = np.array([np.interp(tf, good_t, good[:, j]) for j in range(3)])
-                kept = self.tip_keep[: int(np.searchsorted(self.tip_keep, k))]
-                pts = np.vstack([good[kept], good[max(k - 1, 0):k], now[None]])
+            now, last = state["tip"]
+            if now.size:
+                kept = self.trace_pts[: int(np.searchsorted(self.trace_t, tf, side="right"))]
+                pts = np.vstack([kept, *([last[None]] if np.isfinite(last).all() else []), now[None]])
                 if len(pts) >= 2:
                     _add_polyline(scene, pts, self.trace_rgba, 4.0)
             frame = renderer.render()

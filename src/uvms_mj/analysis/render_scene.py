@@ -24,6 +24,7 @@ from uvms_mj.analysis.render_overlay import (
     _stamp_text,
     _thin,
 )
+from uvms_mj.analysis.render_stream import _STREAMED_PAPER, _streamed_span, frame_states, streamed_blocks
 
 
 # ------------------------------------------------------------------ scene
@@ -167,45 +168,34 @@ class _Replay:
         if q_log is None or q_log.ndim != 2 or len(q_log) != len(ts) or len(ts) < 1:
             raise ValueError("the log has no q_true signal matching its time base: nothing to replay")
         tip = _signal(log, "tip_true")
-        if tip is not None and (tip.ndim != 2 or tip.shape[1] < 2 or len(tip) != len(ts)):
-            tip = None
+        self._tip_logged = tip is not None and tip.ndim == 2 and tip.shape[1] >= 2 and len(tip) == len(ts)
         pd = _signal(log, "p_desired")
-        desired = pd[:, 3:5] if pd is not None and pd.ndim == 2 and pd.shape[1] >= 5 and len(pd) == len(ts) \
-            else None
-        # Drop samples that are not finite (a run stopped by a divergence may end with some).
-        ok = np.isfinite(ts) & np.isfinite(q_log).all(axis=1)
-        for arr in (tip, desired):
-            if arr is not None:
-                ok &= np.isfinite(arr[:, :2]).all(axis=1)
-        if not ok.any():
-            raise ValueError("the log has no sample with a finite q_true: nothing to replay")
-        ts, q_log = ts[ok], q_log[ok]
-        tip = tip[ok, :2] if tip is not None else None
-        desired = desired[ok] if desired is not None else None
-        if len(ts) == 1:  # a single sample: a still picture of 1 / fps
-            dup = lambda a: None if a is None else np.vstack([a, a])  # noqa: E731
-            ts, q_log, tip, desired = np.r_[ts, ts + 1.0 / fps], dup(q_log), dup(tip), dup(desired)
-        self.ts, self.speed, self.clock, self.height = ts, speed, clock, height
-        self.frame_t = _frame_times(ts, fps, speed, max_seconds)
-
+        self._has_desired = pd is not None and pd.ndim == 2 and pd.shape[1] >= 5 and len(pd) == len(ts)
+        self._log = log
         model = self.model = _scene_model(model_path, width, height)
         data = self.data = mujoco.MjData(model)
-        self.nq = nq = min(model.nq, q_log.shape[1])
-        self.qs = _interp(self.frame_t, ts, q_log[:, :nq])
-
-        if tip is None and mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, "tip") >= 0:
-            # no logged tip: the model's "tip" site
-            sid = model.site("tip").id
-            tip = np.empty((len(q_log), 2))
-            for k, q in enumerate(q_log):
-                data.qpos[:nq] = q[:nq]
-                mujoco.mj_kinematics(model, data)
-                tip[k] = data.site_xpos[sid, :2]
-        self.tip, self.desired = tip, desired
+        self.nq = min(model.nq, q_log.shape[1])
+        # no logged tip: the model's "tip" site
+        self._tip_site = (model.site("tip").id if not self._tip_logged
+                          and mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_SITE, "tip") >= 0 else None)
+        whole = self._series(ts, {k: _signal(log, k) for k in _STREAMED_PAPER})
+        if not len(whole["q"][0]):
+            raise ValueError("the log has no sample with a finite q_true: nothing to replay")
+        if len(whole["q"][0]) == 1:  # a single sample: a still picture of 1 / fps
+            whole = {k: (np.r_[t, t + 1.0 / fps], np.vstack([x, x])) for k, (t, x) in whole.items()}
+        self._whole = whole
+        ts, q_log = whole["q"]
+        tip = whole["tip"][1] if "tip" in whole else None
+        desired = whole["desired"][1] if "desired" in whole else None
+        self.ts, self.speed, self.clock, self.height = ts, speed, clock, height
+        span = _streamed_span(log, [k for k in ("q_true", "tip_true", "p_desired") if k in log.signals])
+        self.frame_t = _frame_times(np.asarray(span) if span is not None else ts, fps, speed, max_seconds)
+        self._has_tip = tip is not None
 
         # Camera: the fitted side view, or a camera of the scene.
-        stride = _decimate(len(self.qs), 60)
-        lo, hi, z_robot = _robot_extent(model, data, np.vstack([self.qs[::stride], self.qs[-1:]]))
+        stride = _decimate(len(self.frame_t), 60)
+        lo, hi, z_robot = _robot_extent(model, data, _interp(np.r_[self.frame_t[::stride], self.frame_t[-1:]],
+                                                             ts, q_log))
         shown = ts <= self.frame_t[-1] + 1e-9  # the part of the log in the video
         for path in (desired, tip):
             if path is not None:
@@ -237,7 +227,10 @@ class _Replay:
         if desired is not None:
             keep = _thin(_simplify(desired, _TRACE_TOL), 300)
             self.desired_pts = np.c_[desired[keep], np.zeros(len(keep))]
-        self.tip_keep = _thin(_simplify(tip, _TRACE_TOL), 300) if tip is not None else None
+        self.trace_t, self.trace_pts = np.zeros(0), np.zeros((0, 2))
+        if tip is not None:
+            keep = _thin(_simplify(tip, _TRACE_TOL), 300)
+            self.trace_t, self.trace_pts = ts[keep], tip[keep]
         self.overlay = None
         if labels:
             self.overlay = _labels_overlay(width, height, title if title is not None else _controller_name(log),
@@ -247,26 +240,65 @@ class _Replay:
     def __len__(self) -> int:
         return len(self.frame_t)
 
-    def __iter__(self) -> Iterator[tuple[float, np.ndarray]]:
+    def _series(self, t: np.ndarray, signals) -> dict:
+        """The replayed series of one block (or of the whole log): of the samples whose time,
+        q_true, tip (x, y) and desired tip (``p_desired[3:5]``) are finite, ``q`` (its first
+        ``nq`` values), ``tip`` (logged, else the model's "tip" site; absent without either) and
+        ``desired``."""
         import mujoco
 
-        ts, tip, desired, renderer = self.ts, self.tip, self.desired, self.renderer
+        t = np.asarray(t, dtype=float).ravel()
+        q = np.asarray(signals["q_true"], dtype=float)
+        tip = np.asarray(signals["tip_true"], dtype=float)[:, :2] if self._tip_logged else None
+        desired = np.asarray(signals["p_desired"], dtype=float)[:, 3:5] if self._has_desired else None
+        # Drop samples that are not finite (a run stopped by a divergence may end with some).
+        ok = np.isfinite(t) & np.isfinite(q).all(axis=1)
+        for arr in (tip, desired):
+            if arr is not None:
+                ok &= np.isfinite(arr).all(axis=1)
+        q = q[ok, : self.nq]
+        out = {"q": (t[ok], q)}
+        if tip is None and self._tip_site is not None:
+            tip = np.empty((len(q), 2))
+            for k, qk in enumerate(q):
+                self.data.qpos[: self.nq] = qk
+                mujoco.mj_kinematics(self.model, self.data)
+                tip[k] = self.data.site_xpos[self._tip_site, :2]
+        elif tip is not None:
+            tip = tip[ok]
+        if tip is not None:
+            out["tip"] = (t[ok], tip)
+        if desired is not None:
+            out["desired"] = (t[ok], desired[ok])
+        return out
+
+    def _states(self) -> Iterator[dict]:
+        """Each frame's states (:func:`~.render_stream.frame_states`): from the whole log, or
+        streamed again from a long log's file."""
+        stream = streamed_blocks(self._log, [k for k in _STREAMED_PAPER if k in self._log.signals])
+        return frame_states(self.frame_t, self._whole, stream, self._series)
+
+    def qpos_frames(self) -> np.ndarray:
+        """The replayed ``qpos[:nq]`` of every frame (M, nq) (tests: holds every frame)."""
+        return np.array([s["q"][0] for s in self._states()])
+
+    def __iter__(self) -> Iterator[tuple[float, np.ndarray]]:
+        renderer = self.renderer
         scene = renderer.scene
-        for tf, q in zip(self.frame_t, self.qs):
-            self.data.qpos[: self.nq] = q
+        for tf, state in zip(self.frame_t, self._states()):
+            self.data.qpos[: self.nq] = state["q"][0]
             _pose(self.model, self.data)
             renderer.update_scene(self.data, camera=self.cam)
             eye = 0.5 * (np.asarray(scene.camera[0].pos) + np.asarray(scene.camera[1].pos))
             if self.desired_pts is not None:
                 # thin, in front of the (thicker) trace so that both stay visible when they overlap
                 _add_polyline(scene, _to_front(self.desired_pts, eye, self.z_front + 0.01), _RGBA_DESIRED, 2.0)
-                now = np.r_[np.interp(tf, ts, desired[:, 0]), np.interp(tf, ts, desired[:, 1]), 0.0]
+                now = np.r_[state["desired"][0], 0.0]
                 _add_sphere(scene, _to_front(now[None], eye, self.z_front + 0.02)[0], 0.008, _RGBA_DESIRED)
-            if tip is not None:
-                k = int(np.searchsorted(ts, tf, side="right"))  # samples at or before tf
-                now = [np.interp(tf, ts, tip[:, 0]), np.interp(tf, ts, tip[:, 1])]
-                kept = self.tip_keep[: int(np.searchsorted(self.tip_keep, k))]
-                pts = np.vstack([tip[kept], tip[k - 1:k], now])
+            if self._has_tip:
+                now, last = state["tip"]
+                kept = self.trace_pts[: int(np.searchsorted(self.trace_t, tf, side="right"))]
+                pts = np.vstack([kept, *([last[None]] if np.isfinite(last).all() else []), now[None]])
                 if len(pts) >= 2:
                     pts = np.c_[pts, np.zeros(len(pts))]
                     _add_polyline(scene, _to_front(pts, eye, self.z_front), _RGBA_TRACE, 5.0)

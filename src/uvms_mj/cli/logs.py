@@ -10,10 +10,13 @@ import click
 from uvms_mj.cli.common import EXIT_RENDER, _check_dir, _check_out, _io_error, _progress, _read
 from uvms_mj.io.interrupts import partial_output
 
-#: The signals a video reads of a log (uvms_mj.analysis.render*: the replayed q_true, the tip's
-#: trace and desired path, the overlay's and the compare inset's errors): ``render`` and
-#: ``run --video`` read only these (read_log's subset), so a long log's other signals never load.
-RENDER_SIGNALS = ("q_true", "p_desired", "tip_true", "tip_desired", "base_desired", "e_p", "e_position")
+
+def _read_video_log(path: str):
+    """A log as a video reads it (:func:`uvms_mj.analysis.render_stream.read_render_log`: in memory that
+    does not grow with the log), bad files a usage error."""
+    from uvms_mj.analysis.render_stream import RENDER_SIGNALS, read_render_log
+
+    return _read(path, RENDER_SIGNALS, reader=read_render_log)
 
 
 @click.command()
@@ -48,7 +51,7 @@ def render(logs: tuple[str, ...], out: str | None, out_old: str | None, compare:
     else:
         path = Path(out) if out else first.with_suffix(".mp4")
     _check_out(path, protect=logs, kind="video", option="--out")
-    runs = [_read(p, RENDER_SIGNALS) for p in logs]
+    runs = [_read_video_log(p) for p in logs]
     try:
         with _progress(f"render {path.name}", "frame") as tick, partial_output(path):
             if compare:

@@ -125,9 +125,9 @@ def _default_log(scenario, out: str | None, controller: str) -> Path:
 
 
 def _video(log_path: Path, video_path: Path, scenario=None, echo=click.echo, protect: tuple = ()) -> None:
-    from uvms_mj.cli.logs import RENDER_SIGNALS
+    from uvms_mj.cli.logs import _read_video_log
 
-    log = _read(log_path, RENDER_SIGNALS)
+    log = _read_video_log(log_path)
     kw = {}
     if scenario is not None:
         kw = {"fps": scenario.outputs.video_fps, "size": tuple(scenario.outputs.video_size)}

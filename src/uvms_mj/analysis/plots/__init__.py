@@ -35,9 +35,10 @@ import numpy as np
 
 # common: log access and drawing helpers; paper: the planar paper robot's figures; robot: any
 # floating robot's (logs with meta["robot"]). This module picks one for each log.
-from uvms_mj.analysis.plots.paper import _plot_paper_comparison, _plot_paper_run, tracking_errors
-from uvms_mj.analysis.plots.robot import _plot_robot_comparison, _plot_robot_run, _robot, attitude_error, robot_errors
-from uvms_mj.analysis.plots.envelope import read_plot_log
+from uvms_mj.analysis.plots.paper import _plot_paper_comparison, _plot_paper_run
+from uvms_mj.analysis.plots.robot import _plot_robot_comparison, _plot_robot_run
+from uvms_mj.analysis.series import robot_of, attitude_error, robot_errors, tracking_errors
+from uvms_mj.analysis.envelope import read_plot_log
 
 __all__ = ["COMPARE_SIGNALS", "PLOT_SIGNALS", "attitude_error", "plot_run", "plot_run_paths", "plot_comparison",
            "read_plot_log", "robot_errors", "tracking_errors"]
@@ -79,7 +80,7 @@ def plot_run(log, out_dir: str | Path, stem: str = "run") -> list[Path]:
         raise ValueError(f"the log has {len(t)} samples: at least 2 are needed to plot")
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
-    robot = _robot(log)
+    robot = robot_of(log)
     if robot is not None:
         return _plot_robot_run(log, robot, out, stem)
     return _plot_paper_run(log, out, stem)
@@ -95,7 +96,7 @@ def _slim(log):
 
     full = read_plot_log(log, signals=COMPARE_SIGNALS)
     sig = dict(full.signals)
-    robot = _robot(full) is not None
+    robot = robot_of(full) is not None
     q = sig.get("q_true")
     if q is not None and q.ndim == 2:
         sig["q_true"] = np.ascontiguousarray(q[:, :7] if robot else q[:, :3])
@@ -133,7 +134,7 @@ def plot_comparison(logs: Mapping[str, Any], out_path: str | Path) -> Path:
         raise ValueError("plot_comparison needs at least one log")
     logs = {label: _slim(log) for label, log in logs.items()}  # a path: read, one at a time
     out_path = Path(out_path)
-    robots = {label: _robot(log) for label, log in logs.items()}
+    robots = {label: robot_of(log) for label, log in logs.items()}
     if any(r is not None for r in robots.values()):
         paper = [label for label, r in robots.items() if r is None]
         if paper:

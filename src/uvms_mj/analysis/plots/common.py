@@ -4,11 +4,10 @@ figure's memory independent of the run's length: every line added to one of our 
 most :data:`MAX_LINE_POINTS` points (:func:`decimate`: per bucket of consecutive samples its
 first and last point and the points of its smallest and largest x and y, so that every peak
 stays visible); the numbers a figure prints (RMS, max) come from the full data (:func:`error_stats`:
-the log's own where :func:`uvms_mj.analysis.plots.envelope.read_plot_log` has thinned it)."""
+the log's own where :func:`uvms_mj.analysis.envelope.read_plot_log` has thinned it)."""
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import Any, Mapping
 
 import numpy as np
@@ -17,6 +16,8 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
+from uvms_mj.analysis.series import ErrorStats, ErrorSums, _firsts, _select, _sig, error_stats  # noqa: F401
+
 _PHASES = {1: ("carry (base moves with the arm)", "#f4a582"), 2: ("release", "#92c5de")}
 _XY = ("#1f77b4", "#d62728")  # x, y
 _DPI = 110
@@ -24,39 +25,6 @@ _DPI = 110
 #: The most points a line in one of our figures keeps [points] (ours: a panel is about 700 px
 #: wide at :data:`_DPI`, so 1000 buckets of up to 8 points each are finer than a pixel column).
 MAX_LINE_POINTS = 8000
-
-
-def _firsts(rows: np.ndarray, pos: np.ndarray) -> np.ndarray:
-    """Of the rows (sorted indices into the bucket positions ``pos``), the first of each bucket."""
-    if not len(rows):
-        return rows
-    p = pos[rows]
-    return rows[np.r_[True, p[1:] != p[:-1]]]
-
-
-def _select(index: np.ndarray, K: np.ndarray, size: int) -> np.ndarray:
-    """Positions (sorted) of the samples to keep: per bucket ``index // size`` (``index``: the
-    samples' increasing indices, consecutive or not) its first and last sample and, per column of
-    K (n, C), its first smallest, first largest and first NaN value. What :func:`decimate` keeps of a
-    line and :mod:`uvms_mj.analysis.plots.envelope` of a log."""
-    n = len(index)
-    if not n:
-        return np.zeros(0, dtype=np.int64)
-    b = index // size
-    new = np.r_[True, b[1:] != b[:-1]]
-    starts = np.flatnonzero(new)
-    pos = np.cumsum(new) - 1  # each sample's bucket (0 ...)
-    picks = [starts, np.r_[starts[1:] - 1, n - 1]]
-    for c in range(K.shape[1]):
-        v = K[:, c]
-        nan = np.isnan(v)
-        lo = np.minimum.reduceat(np.where(nan, np.inf, v), starts)
-        hi = np.maximum.reduceat(np.where(nan, -np.inf, v), starts)
-        picks.append(_firsts(np.flatnonzero(v == lo[pos]), pos))
-        picks.append(_firsts(np.flatnonzero(v == hi[pos]), pos))
-        if nan.any():
-            picks.append(_firsts(np.flatnonzero(nan), pos))
-    return np.unique(np.concatenate(picks))
 
 
 def decimate(x: np.ndarray, y: np.ndarray, max_points: int = MAX_LINE_POINTS) -> np.ndarray:
@@ -132,19 +100,6 @@ class _DecimatingFigure(Figure):
         if "projection" not in kwargs and "polar" not in kwargs:
             kwargs.setdefault("axes_class", _DecimatingAxes)
         return super().add_subplot(*args, **kwargs)
-
-
-def _sig(log, name: str) -> np.ndarray | None:
-    signals = getattr(log, "signals", None) or {}
-    try:
-        if name not in signals:
-            return None
-        arr = np.asarray(signals[name], dtype=float)
-    except (KeyError, TypeError, ValueError):
-        return None
-    if arr.size == 0 or len(arr) != len(np.asarray(log.t)):
-        return None
-    return arr
 
 
 def _meta(log) -> Mapping[str, Any]:
@@ -228,64 +183,3 @@ def _new_figure(rows: int, cols: int, size: tuple[float, float]) -> tuple[Figure
 def _g(x: float) -> str:
     """3 significant digits, no exponent for the usual range (0.0123, 1.23, 123)."""
     return f"{x:.3g}" if (x == 0 or 1e-3 <= abs(x) < 1e4) else f"{x:.2e}"
-
-
-@dataclass(frozen=True)
-class ErrorStats:
-    """The statistics a figure prints of one tracking error (N, m) (or (N,): m = 1), over its finite
-    values [the error's units]: per column ``rms`` and ``absmax`` (max |e_j|), and of the row norm
-    |e| its ``norm_rms`` and ``norm_max`` (NaN where nothing is finite)."""
-
-    rms: tuple[float, ...]
-    absmax: tuple[float, ...]
-    norm_rms: float
-    norm_max: float
-
-
-class ErrorSums:
-    """:class:`ErrorStats` of errors given block by block (``add`` a dict key -> array per block,
-    then ``stats()``): sums of squares, counts and maxima, so the result is that of the whole
-    arrays (to rounding: the sums are added in block order)."""
-
-    def __init__(self) -> None:
-        self._acc: dict[str, list] = {}
-
-    def add(self, errors: Mapping[str, np.ndarray]) -> None:
-        for key, e in errors.items():
-            e = np.asarray(e, dtype=float)
-            e = e.reshape(len(e), -1)
-            ok = np.isfinite(e)
-            z = np.where(ok, e, 0.0)
-            norm = np.linalg.norm(e, axis=1)
-            nok = np.isfinite(norm)
-            part = [np.sum(z * z, axis=0), ok.sum(axis=0),
-                    np.max(np.where(ok, np.abs(e), -np.inf), axis=0, initial=-np.inf),
-                    float(np.sum(np.square(norm[nok]))), int(nok.sum()),
-                    float(np.max(norm[nok], initial=-np.inf))]
-            acc = self._acc.get(key)
-            if acc is None or len(acc[0]) != e.shape[1]:
-                self._acc[key] = part
-                continue
-            acc[0], acc[1], acc[2] = acc[0] + part[0], acc[1] + part[1], np.maximum(acc[2], part[2])
-            acc[3], acc[4], acc[5] = acc[3] + part[3], acc[4] + part[4], max(acc[5], part[5])
-
-    def stats(self) -> dict[str, ErrorStats]:
-        nan = float("nan")
-        out = {}
-        for key, (ss, n, mx, nss, nn, nmx) in self._acc.items():
-            rms = tuple(float(np.sqrt(s / c)) if c else nan for s, c in zip(ss, n))
-            absmax = tuple(float(v) if c else nan for v, c in zip(mx, n))
-            out[key] = ErrorStats(rms, absmax, float(np.sqrt(nss / nn)) if nn else nan, nmx if nn else nan)
-        return out
-
-
-def error_stats(log, errors: Mapping[str, np.ndarray]) -> dict[str, ErrorStats]:
-    """The statistics of a log's errors the figures print: the log's own ``error_stats`` where it
-    has them (:func:`uvms_mj.analysis.plots.envelope.read_plot_log`: of the whole log, whose samples
-    it has thinned), else those of ``errors`` (the arrays the figure draws)."""
-    given = getattr(log, "error_stats", None)
-    if isinstance(given, Mapping) and set(errors) <= set(given):
-        return dict(given)
-    sums = ErrorSums()
-    sums.add(errors)
-    return sums.stats()

@@ -15,21 +15,9 @@ from matplotlib.figure import Figure
 
 from uvms_mj.analysis.plots.common import (_DPI, _XY, _dig, _finish, _g, _headroom, _label, _meta, _missing,
                                            _new_figure, _shade, _shade_phases, _sig, error_stats)
+from uvms_mj.analysis.series import tracking_errors
 
 _THR = ("#1f77b4", "#ff7f0e", "#2ca02c")
-
-
-def tracking_errors(log) -> dict[str, np.ndarray]:
-    """Desired minus true, SI units: 'base' (N, 2) [m], 'att' (N,) [rad], 'tip' (N, 2) [m]
-    (keys missing when a signal is absent)."""
-    pd, q, tip = _sig(log, "p_desired"), _sig(log, "q_true"), _sig(log, "tip_true")
-    out: dict[str, np.ndarray] = {}
-    if pd is not None and q is not None:
-        out["base"] = pd[:, :2] - q[:, :2]
-        out["att"] = pd[:, 2] - q[:, 2]
-    if pd is not None and tip is not None and pd.shape[1] >= 5:
-        out["tip"] = pd[:, 3:5] - tip
-    return out
 
 
 def _thrust_limits(log) -> list[tuple[float, float]] | None:

@@ -15,6 +15,7 @@ from matplotlib.figure import Figure
 
 from uvms_mj.analysis.plots.common import (_DPI, ErrorStats, _finish, _g, _headroom, _label, _missing, _new_figure,
                                            _sig, error_stats)
+from uvms_mj.analysis.series import _quat_rows, robot_of, attitude_error, robot_errors  # noqa: F401
 
 # The vehicle's free joint comes first in qpos (x, y, z [m] world, qw, qx, qy, qz) and the arm
 # joints follow (one angle each), as in every built-in robot (uvms_mj.plant.robot); velocities:
@@ -25,12 +26,6 @@ _COLORS = ("#1f77b4", "#d62728", "#2ca02c", "#9467bd", "#ff7f0e", "#8c564b", "#e
 _XYZ = ("#1f77b4", "#d62728", "#2ca02c")
 
 
-def _robot(log) -> dict | None:
-    from uvms_mj.analysis.render import robot_of
-
-    return robot_of(log)
-
-
 def _names(robot: Mapping[str, Any], key: str, n: int, generic: str) -> list[str]:
     """The model's names of ``key`` ("joints", "thrusters", "motors") from the log's layout, or
     generic ones when they are missing or do not match the signal's width ``n``."""
@@ -39,13 +34,6 @@ def _names(robot: Mapping[str, Any], key: str, n: int, generic: str) -> list[str
     if isinstance(names, (list, tuple)) and len(names) == n:
         return [str(x) for x in names]
     return [f"{generic} {i + 1}" for i in range(n)]
-
-
-def _quat_rows(q: np.ndarray) -> np.ndarray:
-    """Unit quaternions (N, 4) (w x y z); a zero row stays NaN."""
-    n = np.linalg.norm(q, axis=1, keepdims=True)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        return q / n
 
 
 def _rpy_deg(quat: np.ndarray) -> np.ndarray:
@@ -61,43 +49,6 @@ def _rpy_deg(quat: np.ndarray) -> np.ndarray:
     for j in (0, 2):
         out[ok, j] = np.unwrap(out[ok, j])
     return np.degrees(out)
-
-
-def attitude_error(q_desired: np.ndarray, q: np.ndarray) -> np.ndarray:
-    """Rotation vector [rad] (N, 3), BODY frame, that turns the true attitude ``q`` into the
-    desired ``q_desired`` (quaternions w x y z, (N, 4)): log(q^-1 q_desired), angle in [0, pi]."""
-    a, b = _quat_rows(q), _quat_rows(q_desired)
-    w1, v1 = a[:, 0], -a[:, 1:]  # conj(q)
-    w2, v2 = b[:, 0], b[:, 1:]
-    w = w1 * w2 - np.sum(v1 * v2, axis=1)
-    v = w1[:, None] * v2 + w2[:, None] * v1 + np.cross(v1, v2)
-    sign = np.where(w < 0, -1.0, 1.0)[:, None]  # the short way round
-    w, v = np.abs(w), v * sign
-    s = np.linalg.norm(v, axis=1)
-    angle = 2 * np.arctan2(s, w)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        scale = np.where(s > 1e-12, angle / np.where(s > 1e-12, s, 1.0), 2.0)
-    return v * scale[:, None]
-
-
-def robot_errors(log) -> dict[str, np.ndarray]:
-    """Desired minus true of a robot log, SI units: 'base' (N, 3) [m] world, 'att' (N, 3)
-    [rad] body-frame rotation vector, 'tip' (N, 3) [m] world. From ``base_desired`` and
-    ``tip_desired`` against the true state, else the controller's ``e_position`` /
-    ``e_attitude``; keys missing when not logged."""
-    q, bd, td, tip = _sig(log, "q_true"), _sig(log, "base_desired"), _sig(log, "tip_desired"), _sig(log, "tip_true")
-    out: dict[str, np.ndarray] = {}
-    if q is not None and q.shape[1] >= 7 and bd is not None and bd.shape[1] >= 7:
-        out["base"] = bd[:, :3] - q[:, :3]
-        out["att"] = attitude_error(bd[:, 3:7], q[:, 3:7])
-    else:
-        for key, name in (("base", "e_position"), ("att", "e_attitude")):
-            e = _sig(log, name)
-            if e is not None and e.ndim == 2 and e.shape[1] == 3:
-                out[key] = e
-    if td is not None and tip is not None and td.shape[1:] == tip.shape[1:] == (3,) and np.isfinite(tip).any():
-        out["tip"] = td - tip
-    return out
 
 
 def _desired_true(a: Axes, t: np.ndarray, true: np.ndarray, desired: np.ndarray | None, labels: list[str],

@@ -29,9 +29,7 @@ from typing import Iterable
 
 import numpy as np
 
-from uvms_mj.analysis.plots.common import ErrorStats, ErrorSums, _select
-from uvms_mj.analysis.plots.paper import tracking_errors
-from uvms_mj.analysis.plots.robot import _robot, robot_errors
+from uvms_mj.analysis.series import ErrorStats, ErrorSums, robot_of, _select, robot_errors, tracking_errors
 
 __all__ = ["ENVELOPE_BUCKETS", "ENVELOPE_ROWS", "PlotLog", "read_plot_log"]
 
@@ -173,7 +171,7 @@ class _Envelope:
 
 
 def read_plot_log(path: str | os.PathLike, signals: Iterable[str] | None = None, rows: int = ENVELOPE_ROWS,
-                  buckets: int = ENVELOPE_BUCKETS) -> PlotLog:
+                  buckets: int = ENVELOPE_BUCKETS, on_block=None) -> PlotLog:
     """The log at ``path`` as its figures need it, in bounded memory (module docstring).
 
     Args:
@@ -181,6 +179,8 @@ def read_plot_log(path: str | os.PathLike, signals: Iterable[str] | None = None,
         signals: the signals to read (default: :data:`uvms_mj.analysis.plots.PLOT_SIGNALS`).
         rows: the most samples kept (>= 64).
         buckets: the most buckets of the envelope (>= 8).
+        on_block: called with every block of samples read (:class:`uvms_mj.io.reader.SampleBlock`),
+            for what another reader accumulates in the same pass (a video's finite spans).
 
     Raises what :func:`uvms_mj.io.reader.iter_samples` raises for a file that is not a log. A log
     whose robot is recorded after its first samples (none of ours) gets the paper's error kinds.
@@ -199,7 +199,9 @@ def read_plot_log(path: str | os.PathLike, signals: Iterable[str] | None = None,
     errors_of = None
     for block in iter_samples(path, signals=list(signals), stream=st):
         if errors_of is None:
-            errors_of = robot_errors if _robot(st) is not None else tracking_errors
+            errors_of = robot_errors if robot_of(st) is not None else tracking_errors
+        if on_block is not None:
+            on_block(block)
         errs = errors_of(_Block(block.t, block.signals, st.meta))
         sums.add(errs)
         env.add(block.t, block.signals, _columns(len(block.t), block.signals, errs))
