@@ -238,3 +238,27 @@ def test_compare_video_side_by_side(run, tmp_path: Path) -> None:
     assert _orange(last[:160, :160]).sum() > 50 and _orange(last[:160, 160:]).sum() > 50  # two robots
     # the inset's cursor moves with time
     assert np.abs(frames[2][160:].astype(int) - frames[-1][160:].astype(int)).max() > 100
+
+
+def test_closing_one_replay_leaves_the_others_frames(run) -> None:
+    """Two replays in one process (a comparison; the paper's first replay is rebuilt on the
+    shared view): closing one must not free the other's offscreen buffer. mujoco.Renderer.close
+    frees its render context in whatever GL context is current, so the second replay's frames came
+    out upside down and partly garbage until the renderer's own context was made current first
+    (render_gl._close_renderer). The survivor's frame is the same picture before and after (at
+    most 1 level: the same renderer drawing the same scene)."""
+    from uvms_mj.analysis.render_scene import _Replay
+
+    res = run
+    kw = dict(fps=5, size=(160, 120), camera=None, speed=1.0, max_seconds=None, model_path=None, clock=True)
+    b = _Replay(res, **kw)
+    try:
+        before = next(iter(b))[1].copy()
+        a = _Replay(res, **kw)
+        next(iter(a))
+        next(iter(b))  # b's GL context is the current one when a closes
+        a.close()
+        after = next(iter(b))[1]
+        assert np.abs(before.astype(int) - after).max() <= 1
+    finally:
+        b.close()

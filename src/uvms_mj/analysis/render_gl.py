@@ -228,6 +228,21 @@ def _make_renderer(model, height: int, width: int):
                           f"{_install_hint()}") from None
 
 
+def _close_renderer(renderer) -> None:
+    """Close a ``mujoco.Renderer`` with its own GL context current. ``Renderer.close`` frees its
+    MuJoCo render context (framebuffers, textures) in whatever context is current, which is
+    another renderer's after that one rendered: the other renderer's offscreen buffer was freed and
+    its frames came out upside down and partly garbage (a comparison video whose first replay was
+    rebuilt on the shared view; ``tests/test_render.py``)."""
+    gl = getattr(renderer, "_gl_context", None)
+    if gl is not None and getattr(renderer, "_mjr_context", None) is not None:
+        try:
+            gl.make_current()
+        except Exception:  # noqa: BLE001 (a context already gone: close frees what is left)
+            pass
+    renderer.close()
+
+
 def dm_control_context_class():
     """The OpenGL context class dm_control's ``Physics`` should create for rendering now: its own
     choice (``dm_control._render.Renderer``), except on Linux without a display where dm_control

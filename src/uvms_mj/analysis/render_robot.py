@@ -20,7 +20,7 @@ from typing import Iterator, Mapping
 
 import numpy as np
 
-from uvms_mj.analysis.render_gl import _make_renderer
+from uvms_mj.analysis.render_gl import _close_renderer, _make_renderer
 from uvms_mj.analysis.series import robot_of
 from uvms_mj.analysis.render_overlay import (
     _RGBA_BASE,
@@ -465,7 +465,7 @@ class _RobotReplay:
             yield float(tf), frame
 
     def close(self) -> None:
-        self.renderer.close()
+        _close_renderer(self.renderer)
 
 
 def _replay(log, fps: float, size: tuple[int, int], camera, speed: float, max_seconds: float | None,

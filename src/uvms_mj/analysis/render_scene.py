@@ -11,7 +11,7 @@ from typing import Iterator
 
 import numpy as np
 
-from uvms_mj.analysis.render_gl import _make_renderer
+from uvms_mj.analysis.render_gl import _close_renderer, _make_renderer
 from uvms_mj.analysis.render_overlay import (
     _RGBA_DESIRED,
     _RGBA_TRACE,
@@ -311,6 +311,6 @@ class _Replay:
             yield float(tf), frame
 
     def close(self) -> None:
-        self.renderer.close()
+        _close_renderer(self.renderer)
 
 
