@@ -27,7 +27,6 @@ from uvms_mj.analysis.render_overlay import (
     _RGBA_DESIRED,
     _RGBA_TRACE,
     _controller_name,
-    _interp,
     _labels_overlay,
     _signal,
     _simplify,
@@ -43,8 +42,8 @@ from uvms_mj.analysis.render_scene import (
     _frame_times,
     _pose,
 )
-from uvms_mj.analysis.render_stream import (_STREAMED_ROBOT as _STREAMED, _streamed_span, continuous_quaternions, frame_states,
-                                           streamed_blocks)
+from uvms_mj.analysis.render_stream import (_STREAMED_ROBOT as _STREAMED, _streamed_span, continuous_quaternions,
+                                           frame_states, hold_single, lerp_qpos)
 from uvms_mj.analysis.render_camera import DIRECTIONS, FOVY, FollowCamera, fit_camera, heading_frame, px_per_metre
 
 
@@ -106,11 +105,7 @@ def interp_qpos(t: np.ndarray, ts: np.ndarray, q: np.ndarray, quat_slots: list[i
     linearly, each quaternion by normalised linear interpolation (after choosing the sign of
     each sample nearest the previous one, :func:`~.render_stream.continuous_quaternions`, so that
     no interpolation goes the long way round)."""
-    out = _interp(t, ts, continuous_quaternions(q, quat_slots))
-    for a in quat_slots:
-        n = np.linalg.norm(out[:, a:a + 4], axis=1, keepdims=True)
-        out[:, a:a + 4] /= np.where(n > 0, n, 1.0)
-    return out
+    return lerp_qpos(t, ts, continuous_quaternions(q, quat_slots), quat_slots)
 
 
 def _visible_geoms(model) -> list[int]:
@@ -318,7 +313,7 @@ class _RobotReplay:
         # (else the vehicle origin's) and the desired tip path
         self._has_tip = _finite_rows(_signal(log, "tip_true"), n, 3) is not None
         self._has_desired = _finite_rows(_signal(log, "tip_desired"), n, 3) is not None
-        self._log, self._base_qadr = log, None
+        self._log = log
 
         # framed: the part of the log (and of frame_also's) in the video, found the same way for both
         own = _framed_motion(log, max_seconds, speed)
@@ -328,11 +323,8 @@ class _RobotReplay:
         self.model, self.layout = model, layout
         self._base_qadr = layout.base_qadr
         self.data = mujoco.MjData(model)
-        whole = self._series(ts, {k: _signal(log, k) for k in _STREAMED})
-        if len(whole["q"][0]) == 1:  # a single sample: a still picture of 1 / fps
-            whole = {k: (np.r_[t, t + 1.0 / fps], np.vstack([x, x])) if len(t) else (t, x)
-                     for k, (t, x) in whole.items()}
-        self._whole = whole
+        # a single sample: a still picture of 1 / fps
+        whole = self._whole = hold_single(self._series(ts, {k: _signal(log, k) for k in _STREAMED}), 1.0 / fps)
         ts = whole["q"][0]
         self.ts, self.speed, self.clock, self.height = ts, speed, clock, height
         span = _streamed_span(log, ["q_true"])
@@ -428,8 +420,7 @@ class _RobotReplay:
     def _states(self) -> Iterator[dict]:
         """Each frame's states (:func:`~.render_stream.frame_states`): from the whole log, or
         streamed again from a long log's file."""
-        stream = streamed_blocks(self._log, [k for k in _STREAMED if k in self._log.signals])
-        return frame_states(self.frame_t, self._whole, stream, self._series, self._quats)
+        return frame_states(self.frame_t, self._log, self._whole, _STREAMED, self._series, self._quats)
 
     def qpos_frames(self) -> np.ndarray:
         """The replayed ``qpos`` of every frame (M, nq) (tests: holds every frame)."""

@@ -24,7 +24,7 @@ from uvms_mj.analysis.render_overlay import (
     _stamp_text,
     _thin,
 )
-from uvms_mj.analysis.render_stream import _STREAMED_PAPER, _streamed_span, frame_states, streamed_blocks
+from uvms_mj.analysis.render_stream import _STREAMED_PAPER, _streamed_span, frame_states, hold_single
 
 
 # ------------------------------------------------------------------ scene
@@ -181,9 +181,7 @@ class _Replay:
         whole = self._series(ts, {k: _signal(log, k) for k in _STREAMED_PAPER})
         if not len(whole["q"][0]):
             raise ValueError("the log has no sample with a finite q_true: nothing to replay")
-        if len(whole["q"][0]) == 1:  # a single sample: a still picture of 1 / fps
-            whole = {k: (np.r_[t, t + 1.0 / fps], np.vstack([x, x])) for k, (t, x) in whole.items()}
-        self._whole = whole
+        whole = self._whole = hold_single(whole, 1.0 / fps)  # a single sample: a still picture of 1 / fps
         ts, q_log = whole["q"]
         tip = whole["tip"][1] if "tip" in whole else None
         desired = whole["desired"][1] if "desired" in whole else None
@@ -275,8 +273,7 @@ class _Replay:
     def _states(self) -> Iterator[dict]:
         """Each frame's states (:func:`~.render_stream.frame_states`): from the whole log, or
         streamed again from a long log's file."""
-        stream = streamed_blocks(self._log, [k for k in _STREAMED_PAPER if k in self._log.signals])
-        return frame_states(self.frame_t, self._whole, stream, self._series)
+        return frame_states(self.frame_t, self._log, self._whole, _STREAMED_PAPER, self._series)
 
     def qpos_frames(self) -> np.ndarray:
         """The replayed ``qpos[:nq]`` of every frame (M, nq) (tests: holds every frame)."""

@@ -24,7 +24,7 @@ from uvms_mj.analysis.envelope import PlotLog
 from uvms_mj.analysis.render_overlay import _interp
 
 __all__ = ["RENDER_BUCKETS", "RENDER_ROWS", "RENDER_SIGNALS", "FiniteSpans", "FrameStates", "RenderLog", "continuous_quaternions", "frame_states",
-           "read_render_log", "streamed_blocks"]
+           "hold_single", "lerp_qpos", "read_render_log", "streamed_blocks"]
 
 #: The signals a video reads of a log (the replayed q_true, the tip's trace and desired path, the
 #: labels' and the compare inset's errors): ``render`` and ``run --video`` read only these.
@@ -137,6 +137,26 @@ def continuous_quaternions(q: np.ndarray, quat_slots: list[int], previous: np.nd
     return q
 
 
+def lerp_qpos(t: np.ndarray, ts: np.ndarray, q: np.ndarray, quat_slots: list[int]) -> np.ndarray:
+    """``qpos`` samples q (N, nq) at ts whose quaternions are already continuous
+    (:func:`continuous_quaternions`), interpolated at times t (M,): every value linearly (clamped
+    at the ends), then each quaternion normalised (normalised linear interpolation)."""
+    out = _interp(t, ts, q)
+    for a in quat_slots:
+        n = np.linalg.norm(out[:, a:a + 4], axis=1, keepdims=True)
+        out[:, a:a + 4] /= np.where(n > 0, n, 1.0)
+    return out
+
+
+def hold_single(series: Series, dt: float) -> Series:
+    """A replay of a single sample (``series["q"]`` has one) held for ``dt`` [s], a still picture
+    of one frame: every series' sample repeated at t + dt (a series without one unchanged); any
+    other replay unchanged."""
+    if len(series["q"][0]) != 1:
+        return series
+    return {k: (np.r_[t, t + dt], np.vstack([x, x])) if len(t) else (t, x) for k, (t, x) in series.items()}
+
+
 class _Track:
     """One series' frames: the tail sample of the blocks so far and the frames computed."""
 
@@ -166,10 +186,7 @@ class _Track:
         end = len(frame_t) if final else int(np.searchsorted(frame_t, ts[-1], side="right"))
         if end > self.done:
             tf = frame_t[self.done:end]
-            now = _interp(tf, ts, x)
-            for a in self.quats:
-                n = np.linalg.norm(now[:, a:a + 4], axis=1, keepdims=True)
-                now[:, a:a + 4] /= np.where(n > 0, n, 1.0)
+            now = lerp_qpos(tf, ts, x, self.quats)
             k = np.searchsorted(ts, tf, side="right") - 1  # the last sample at or before each frame
             last = x[np.maximum(k, 0)].copy()
             last[k < 0] = np.nan
@@ -226,10 +243,12 @@ class FrameStates:
             yield {name: (now[i], last[i]) for name, (now, last) in got.items()}
 
 
-def frame_states(frame_t: np.ndarray, whole: Series, stream: Iterator[tuple[np.ndarray, dict]] | None,
+def frame_states(frame_t: np.ndarray, log, whole: Series, signals: Iterable[str],
                  series_of: Callable[[np.ndarray, dict], Series],
                  quat_slots: dict[str, list[int]] | None = None) -> Iterator[dict]:
-    """The frames' states (:class:`FrameStates`) from ``whole`` (the series of a log held whole) or,
-    when ``stream`` is given (:func:`streamed_blocks`), from its blocks through ``series_of``."""
+    """The frames' states (:class:`FrameStates`) of ``log``: from ``whole`` (its series at hand)
+    when the log is held whole, else from its file's blocks of ``signals`` (those it has;
+    :func:`streamed_blocks`) through ``series_of``."""
+    stream = streamed_blocks(log, [k for k in signals if k in log.signals])
     blocks = [whole] if stream is None else (series_of(t, sig) for t, sig in stream)
     return FrameStates(frame_t, quat_slots).run(blocks)

@@ -16,7 +16,7 @@ from matplotlib.figure import Figure
 from matplotlib.lines import Line2D
 from matplotlib.patches import Patch
 
-from uvms_mj.analysis.series import ErrorStats, ErrorSums, _firsts, _select, _sig, error_stats  # noqa: F401
+from uvms_mj.analysis.series import _select
 
 _PHASES = {1: ("carry (base moves with the arm)", "#f4a582"), 2: ("release", "#92c5de")}
 _XY = ("#1f77b4", "#d62728")  # x, y

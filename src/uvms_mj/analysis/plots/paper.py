@@ -14,8 +14,8 @@ from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
 from uvms_mj.analysis.plots.common import (_DPI, _XY, _dig, _finish, _g, _headroom, _label, _meta, _missing,
-                                           _new_figure, _shade, _shade_phases, _sig, error_stats)
-from uvms_mj.analysis.series import tracking_errors
+                                           _new_figure, _shade, _shade_phases)
+from uvms_mj.analysis.series import _sig, error_stats, tracking_errors
 
 _THR = ("#1f77b4", "#ff7f0e", "#2ca02c")
 

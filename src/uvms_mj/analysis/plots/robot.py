@@ -13,9 +13,8 @@ from uvms_mj.io.atomic import atomic_path
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from uvms_mj.analysis.plots.common import (_DPI, ErrorStats, _finish, _g, _headroom, _label, _missing, _new_figure,
-                                           _sig, error_stats)
-from uvms_mj.analysis.series import _quat_rows, robot_of, attitude_error, robot_errors  # noqa: F401
+from uvms_mj.analysis.plots.common import _DPI, _finish, _g, _headroom, _label, _missing, _new_figure
+from uvms_mj.analysis.series import ErrorStats, _sig, error_stats, robot_errors
 
 # The vehicle's free joint comes first in qpos (x, y, z [m] world, qw, qx, qy, qz) and the arm
 # joints follow (one angle each), as in every built-in robot (uvms_mj.plant.robot); velocities:
